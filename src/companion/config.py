@@ -1,0 +1,197 @@
+"""Typed, validated configuration from TOML: the one place where user-supplied keys are checked.
+
+A config class is a frozen dataclass whose fields carry metadata:
+
+* ``unit`` and ``doc`` (for docs/parameters.md),
+* ``check``: a function ``value -> str | None`` returning what was expected when invalid,
+* ``choices``: the allowed strings of a ``str`` field.
+
+:func:`build` turns a mapping (parsed TOML) into such a dataclass, rejecting unknown keys with a
+"did you mean" hint and naming the offending key, e.g. ``params.toml: lqr.q: expected 5 numbers``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import tomllib
+import types
+import typing
+from pathlib import Path
+from typing import Any, Callable, Mapping, TypeVar
+
+from companion.errors import ConfigError
+
+T = TypeVar("T")
+Check = Callable[[Any], "str | None"]
+
+
+def param(default: Any, unit: str, doc: str, check: Check | None = None,
+          choices: tuple[str, ...] | None = None) -> Any:
+    """Declare a documented configuration field with an optional validity check."""
+    meta = {"unit": unit, "doc": doc, "check": check, "choices": choices}
+    if isinstance(default, (list, dict)):
+        raise TypeError("param: use a tuple for sequence defaults")
+    if dataclasses.is_dataclass(default):
+        return dataclasses.field(default_factory=lambda: default, metadata=meta)
+    return dataclasses.field(default=default, metadata=meta)
+
+
+def positive(x: float) -> str | None:
+    return None if 0.0 < x < math.inf else "a finite positive number"
+
+
+def non_negative(x: float) -> str | None:
+    return None if 0.0 <= x < math.inf else "a finite number >= 0"
+
+
+def all_positive(xs: tuple[float, ...]) -> str | None:
+    return None if all(0.0 < x < math.inf for x in xs) else "all entries finite and positive"
+
+
+def all_non_negative(xs: tuple[float, ...]) -> str | None:
+    return None if all(0.0 <= x < math.inf for x in xs) else "all entries finite and >= 0"
+
+
+def all_positive_or_inf(xs: tuple[float, ...]) -> str | None:
+    return None if all(x > 0.0 for x in xs) else "all entries positive (inf allowed)"
+
+
+def hint(key: str, known: typing.Iterable[str]) -> str:
+    """A "; did you mean 'x'?" suffix for a misspelt key, or an empty string."""
+    close = difflib.get_close_matches(key, list(known), n=1, cutoff=0.6)
+    return f"; did you mean '{close[0]}'?" if close else ""
+
+
+def reject_unknown(mapping: Mapping[str, Any], known: typing.Iterable[str], where: str) -> None:
+    """Raise :class:`ConfigError` naming the first key of ``mapping`` not in ``known``."""
+    known = list(known)
+    for key in mapping:
+        if key not in known:
+            raise ConfigError(f"{where}{key}: unknown key{hint(key, known)} "
+                              f"(known: {', '.join(known)})")
+
+
+def _as_float(value: Any, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ConfigError(f"{name}: expected a number, got {value!r}")
+    x = float(value)
+    if math.isnan(x):
+        raise ConfigError(f"{name}: expected a number, got nan")
+    return x
+
+
+def convert(value: Any, tp: Any, name: str) -> Any:
+    """Convert a TOML value to the annotated type ``tp`` or raise naming ``name``."""
+    origin = typing.get_origin(tp)
+    if tp is float:
+        return _as_float(value, name)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{name}: expected an integer, got {value!r}")
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{name}: expected true or false, got {value!r}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{name}: expected a string, got {value!r}")
+        return value
+    if origin is tuple:
+        args = typing.get_args(tp)
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(f"{name}: expected a list, got {value!r}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(convert(v, args[0], f"{name}[{i}]") for i, v in enumerate(value))
+        if len(value) != len(args):
+            raise ConfigError(f"{name}: expected {len(args)} values, got {len(value)}")
+        return tuple(convert(v, a, f"{name}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
+    if origin in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        if value is None:
+            return None
+        return convert(value, args[0], name)
+    if dataclasses.is_dataclass(tp):
+        if not isinstance(value, Mapping):
+            raise ConfigError(f"{name}: expected a table, got {value!r}")
+        return build(tp, value, prefix=f"{name}.")
+    raise TypeError(f"convert: unsupported field type {tp!r} for {name}")  # programming error
+
+
+def build(cls: type[T], mapping: Mapping[str, Any], prefix: str = "") -> T:
+    """Build the config dataclass ``cls`` from ``mapping``, validating every key and value.
+
+    Keys missing from ``mapping`` take their defaults. ``prefix`` is prepended to key names in
+    error messages (for example ``"scenario.toml: params."``).
+    """
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    reject_unknown(mapping, fields, prefix)
+    kwargs: dict[str, Any] = {}
+    for key, value in mapping.items():
+        f = fields[key]
+        name = f"{prefix}{key}"
+        converted = convert(value, hints[key], name)
+        choices = f.metadata.get("choices")
+        if choices and converted not in choices:
+            raise ConfigError(f"{name}: expected one of {', '.join(map(repr, choices))}, "
+                              f"got {converted!r}{hint(str(converted), choices)}")
+        check = f.metadata.get("check")
+        if check is not None and converted is not None:
+            problem = check(converted)
+            if problem:
+                raise ConfigError(f"{name}: expected {problem}, got {value!r}")
+        kwargs[key] = converted
+    return cls(**kwargs)
+
+
+def validate(obj: Any, prefix: str = "") -> None:
+    """Re-check every field of an already built config object (for objects made in Python)."""
+    hints = typing.get_type_hints(type(obj))
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        name = f"{prefix}{f.name}"
+        if dataclasses.is_dataclass(value):
+            validate(value, prefix=f"{name}.")
+            continue
+        convert(list(value) if isinstance(value, tuple) else value, hints[f.name], name)
+        choices = f.metadata.get("choices")
+        if choices and value not in choices:
+            raise ConfigError(f"{name}: expected one of {', '.join(map(repr, choices))}, "
+                              f"got {value!r}{hint(str(value), choices)}")
+        check = f.metadata.get("check")
+        if check is not None and value is not None:
+            problem = check(value)
+            if problem:
+                raise ConfigError(f"{name}: expected {problem}, got {value!r}")
+
+
+def load_toml(path: str | Path) -> dict[str, Any]:
+    """Parse a TOML file; a missing file or a syntax error raises a one-line ConfigError."""
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: is a directory, expected a TOML file") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not UTF-8 text ({exc.reason})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: invalid TOML: {exc}") from None
+
+
+def field_docs(cls: type, prefix: str = "") -> list[tuple[str, str, str, str]]:
+    """Rows ``(key, unit, default, meaning)`` for every field of ``cls``, nested tables flattened."""
+    rows = []
+    for f in dataclasses.fields(cls):
+        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+        if dataclasses.is_dataclass(default):
+            rows.extend(field_docs(type(default), prefix=f"{prefix}{f.name}."))
+            continue
+        rows.append((f"{prefix}{f.name}", f.metadata.get("unit", ""), repr(default),
+                     f.metadata.get("doc", "")))
+    return rows

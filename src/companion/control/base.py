@@ -1,0 +1,76 @@
+"""The contract every companion controller follows.
+
+A controller is constructed from :class:`~companion.params.Params`, is reset before an
+episode, and maps one :class:`Observation` per sample period to one :class:`Command`:
+
+    controller.reset()
+    command = controller.step(observation)
+
+``step`` must return finite inputs within ``robot.v_max`` and ``robot.omega_max``; the
+contract tests in tests/control/test_contract.py run over every registered controller.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol
+
+from companion.params import RobotParams
+
+
+@dataclass(frozen=True)
+class Pose:
+    """Planar pose of the robot's wheel-axle centre: x, y (m) and heading theta (rad)."""
+
+    x: float
+    y: float
+    theta: float
+
+
+@dataclass(frozen=True)
+class PersonState:
+    """The person's pose and velocity (Eq. 3): x, y (m), theta (rad), v (m/s), omega (rad/s)."""
+
+    x: float
+    y: float
+    theta: float
+    v: float
+    omega: float
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What a controller sees at one sample: time (s), robot pose and person state."""
+
+    t: float
+    robot: Pose
+    person: PersonState
+
+
+@dataclass(frozen=True)
+class Command:
+    """Robot input: linear velocity v (m/s) and angular velocity omega (rad/s)."""
+
+    v: float
+    omega: float
+
+
+class Controller(Protocol):
+    """A companion controller (see module docstring)."""
+
+    def reset(self) -> None:
+        """Forget all internal state before a new episode."""
+
+    def step(self, obs: Observation) -> Command:
+        """Return the input to apply for the next sample period."""
+
+
+def saturate(v: float, omega: float, robot: RobotParams) -> tuple[float, float]:
+    """Clip each input to its limit (|v| <= v_max, |omega| <= omega_max), componentwise."""
+    return (min(max(v, -robot.v_max), robot.v_max),
+            min(max(omega, -robot.omega_max), robot.omega_max))
+
+
+def is_finite_command(cmd: Command) -> bool:
+    return math.isfinite(cmd.v) and math.isfinite(cmd.omega)

@@ -1,0 +1,86 @@
+"""Evaluation metrics of a logged episode (paper Eq. 21-22 and more).
+
+* RMSE (Eq. 21) of rho, alpha and beta against the nominal desired state (rho_d, alpha_d, 0),
+  angle errors wrapped to (-pi, pi];
+* RMSV (Eq. 22) of v and omega against the person's (v_h, omega_h). In a turn the robot must
+  move at a different speed than the person (NOTES.md point 7), so RMSV > 0 there is geometry;
+* minimum distance from the robot centre (wheel axle) to the person;
+* settling time: the first time after which |rho_e| < tol_rho, |alpha_e| < tol_alpha and
+  |beta - beta_ref| < tol_beta hold to the end of the run (None if they do not hold at the end).
+  ``beta_ref`` is the heading offset that holding the slot needs (0 on straight walks);
+* final absolute errors (last sample, beta against beta_ref).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from companion.sim.episode import Log
+
+
+def wrap(a: np.ndarray) -> np.ndarray:
+    """Wrap angles to [-pi, pi)."""
+    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    rho: float = 0.02    # m
+    alpha: float = 0.02  # rad
+    beta: float = 0.02   # rad
+
+
+def errors(log: Log) -> dict[str, np.ndarray]:
+    """Per-sample errors: rho_e, alpha_e, beta_e (vs 0) and beta_ref_e (vs beta_ref)."""
+    return {
+        "rho": log["rho"] - log["rho_d"],
+        "alpha": wrap(log["alpha"] - log["alpha_d"]),
+        "beta": wrap(log["beta"]),
+        "beta_ref": wrap(log["beta"] - log["beta_ref"]),
+    }
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+def settling_time(log: Log, tol: Tolerance = Tolerance()) -> float | None:
+    """First time from which all errors stay inside ``tol`` to the end, or None."""
+    e = errors(log)
+    inside = ((np.abs(e["rho"]) < tol.rho) & (np.abs(e["alpha"]) < tol.alpha)
+              & (np.abs(e["beta_ref"]) < tol.beta))
+    if len(inside) == 0 or not inside[-1]:
+        return None
+    outside = np.flatnonzero(~inside)
+    first = 0 if len(outside) == 0 else outside[-1] + 1
+    return float(log["t"][first])
+
+
+def compute(log: Log, tol: Tolerance = Tolerance()) -> dict:
+    """All metrics as a JSON-ready dict (SI units; key names carry the unit)."""
+    e = errors(log)
+    dist = np.hypot(log["robot_x"] - log["person_x"], log["robot_y"] - log["person_y"])
+    settle = settling_time(log, tol)
+    values = {
+        "rmse_rho_m": _rms(e["rho"]),
+        "rmse_alpha_rad": _rms(e["alpha"]),
+        "rmse_beta_rad": _rms(e["beta"]),
+        "rmsv_v_mps": _rms(log["v"] - log["person_v"]),
+        "rmsv_omega_radps": _rms(log["omega"] - log["person_omega"]),
+        "min_person_distance_m": float(np.min(dist)),
+        "settling_time_s": settle,
+        "final_abs_error": {
+            "rho_m": float(abs(e["rho"][-1])),
+            "alpha_rad": float(abs(e["alpha"][-1])),
+            "beta_rad": float(abs(e["beta_ref"][-1])),
+        },
+        "duration_s": float(log["t"][-1] + (log["t"][1] - log["t"][0]) if len(log) > 1 else 0.0),
+        "steps": len(log),
+    }
+    finite = all(math.isfinite(v) for v in (values["rmse_rho_m"], values["rmse_alpha_rad"]))
+    values["finite"] = bool(finite and np.all(np.isfinite(log["v"]))
+                            and np.all(np.isfinite(log["omega"])))
+    return values
