@@ -25,7 +25,7 @@ def augment(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
-    n, m = b.shape
+    n, m = _shape_of_b(b, "augment")
     if a.shape != (n, n):
         raise ValueError(f"augment: A must be ({n}, {n}) to match B {b.shape}, got {a.shape}")
     a_bar = np.zeros((n + m, n + m))
@@ -34,6 +34,12 @@ def augment(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     a_bar[n:, n:] = np.eye(m)
     b_bar = np.vstack([b, np.eye(m)])
     return a_bar, b_bar
+
+
+def _shape_of_b(b: np.ndarray, where: str) -> tuple[int, int]:
+    if b.ndim != 2:
+        raise ValueError(f"{where}: B must be a 2-D (n, m) matrix, got shape {b.shape}")
+    return b.shape
 
 
 def _check_weights(q: np.ndarray, r: np.ndarray, nx: int, nu: int) -> None:
@@ -51,7 +57,7 @@ def _check_weights(q: np.ndarray, r: np.ndarray, nx: int, nu: int) -> None:
         raise ValueError("dlqr: Q must be positive semi-definite")
 
 
-def dlqr(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray
+def dlqr(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray, check: bool = True
          ) -> tuple[np.ndarray, np.ndarray]:
     """Discrete LQR gain ``K = (R + B'PB)^-1 B'PA`` (Eq. 14) and Riccati solution ``P`` (Eq. 15).
 
@@ -61,6 +67,8 @@ def dlqr(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray
     b : ndarray, shape (n, m)
     q : ndarray, shape (n, n), symmetric positive semi-definite
     r : ndarray, shape (m, m), symmetric positive definite
+    check : bool
+        Validate shapes and weights (skip only in a hot loop whose inputs were checked once).
 
     Returns
     -------
@@ -74,19 +82,26 @@ def dlqr(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray
     ValueError
         If a matrix has the wrong shape or sign.
     numpy.linalg.LinAlgError
-        If no stabilising solution exists (for example an uncontrollable unstable mode).
+        If no stabilising solution exists (for example an uncontrollable mode on or outside
+        the unit circle): the closed loop ``A - BK`` is checked, since the Riccati solver does
+        not always detect this.
     """
-    a = np.asarray(a, dtype=float)
-    b = np.asarray(b, dtype=float)
-    q = np.asarray(q, dtype=float)
-    r = np.asarray(r, dtype=float)
-    n, m = b.shape
-    if a.shape != (n, n):
-        raise ValueError(f"dlqr: A must be ({n}, {n}) to match B {b.shape}, got {a.shape}")
-    _check_weights(q, r, n, m)
+    if check:
+        a = np.asarray(a, dtype=float)
+        b = np.asarray(b, dtype=float)
+        q = np.asarray(q, dtype=float)
+        r = np.asarray(r, dtype=float)
+        n, m = _shape_of_b(b, "dlqr")
+        if a.shape != (n, n):
+            raise ValueError(f"dlqr: A must be ({n}, {n}) to match B {b.shape}, got {a.shape}")
+        _check_weights(q, r, n, m)
     p = solve_discrete_are(a, b, q, r)
     bt_p = b.T @ p
     k = np.linalg.solve(r + bt_p @ b, bt_p @ a)
+    radius = np.max(np.abs(np.linalg.eigvals(a - b @ k)))
+    if not radius < 1.0 - 1e-9:
+        raise np.linalg.LinAlgError(
+            f"dlqr: no stabilising solution (closed-loop spectral radius {radius:.12g})")
     return k, p
 
 

@@ -136,11 +136,16 @@ class SlotReference:
         Heading difference the robot must have to hold ``(rho_d, alpha_d)`` (rad).
     v, omega : float
         Robot input that holds the slot (m/s, rad/s).
+    feasible : bool
+        False when no equilibrium exists: the slot moves slower than ``d * |omega_h|``
+        (the person turns about a point near the slot). The values are then the closest
+        compromise (heading across the slot velocity, or at rest: beta = 0, v = 0).
     """
 
     beta: float
     v: float
     omega: float
+    feasible: bool = True
 
 
 def slot_reference(v_h: float, omega_h: float, rho_d: float, alpha_d: float, d: float
@@ -152,7 +157,8 @@ def slot_reference(v_h: float, omega_h: float, rho_d: float, alpha_d: float, d: 
     its heading turns at ``omega_h`` and its reference point moves with ``V``:
     ``v e(theta_r) + d omega_h e_perp(theta_r) = V``. Of the two headings that solve this
     (forward or reverse driving), the one closer to the person's heading is taken.
-    This is an exact equilibrium of :func:`dynamics` (NOTES.md point 6).
+    This is an exact equilibrium of :func:`dynamics` (NOTES.md point 6) whenever one exists,
+    i.e. when ``|V| >= d |omega_h|``; otherwise ``feasible`` is False.
 
     Everything is expressed in the person's frame, so the result does not depend on
     ``theta_h``.
@@ -162,8 +168,9 @@ def slot_reference(v_h: float, omega_h: float, rho_d: float, alpha_d: float, d: 
     vy = rho_d * omega_h * math.cos(alpha_d)
     speed = math.hypot(vx, vy)
     lateral = d * omega_h
+    feasible = speed >= abs(lateral)
     if speed < 1e-9:
-        return SlotReference(beta=0.0, v=0.0, omega=omega_h)
+        return SlotReference(beta=0.0, v=0.0, omega=omega_h, feasible=feasible)
     psi = math.atan2(vy, vx)
     ratio = max(-1.0, min(1.0, lateral / speed))
     delta = math.asin(ratio)
@@ -172,5 +179,5 @@ def slot_reference(v_h: float, omega_h: float, rho_d: float, alpha_d: float, d: 
     theta_fwd = psi - delta
     theta_rev = psi + math.pi + delta
     if abs(wrap_pi(theta_fwd)) <= abs(wrap_pi(theta_rev)):
-        return SlotReference(beta=wrap_pi(-theta_fwd), v=along, omega=omega_h)
-    return SlotReference(beta=wrap_pi(-theta_rev), v=-along, omega=omega_h)
+        return SlotReference(wrap_pi(-theta_fwd), along, omega_h, feasible)
+    return SlotReference(wrap_pi(-theta_rev), -along, omega_h, feasible)

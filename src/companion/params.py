@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from companion.config import (all_non_negative, all_positive, all_positive_or_inf, build,
-                              load_toml, param, positive, validate)
+                              load_toml, non_negative, param, positive, validate)
 from companion.errors import ConfigError
 from companion.model import SIDES
 
@@ -74,6 +74,16 @@ class LqrParams:
 
 
 @dataclasses.dataclass(frozen=True)
+class SafetyParams:
+    """Keep-out barrier around the person (ours; :mod:`companion.control.safety`)."""
+
+    person_clearance: float = param(0.6, "m", "distance from robot centre to person that the "
+                                    "barrier keeps; 0 switches the barrier off", non_negative)
+    barrier_rate: float = param(2.0, "1/s", "rate of the barrier: the robot may approach at "
+                                "most at barrier_rate * (distance - person_clearance)", positive)
+
+
+@dataclasses.dataclass(frozen=True)
 class Params:
     """Everything that tunes a run; defaults are the paper's Table 1."""
 
@@ -81,6 +91,7 @@ class Params:
     robot: RobotParams = param(RobotParams(), "", "")
     formation: Formation = param(Formation(), "", "")
     lqr: LqrParams = param(LqrParams(), "", "")
+    safety: SafetyParams = param(SafetyParams(), "", "")
 
     def replace(self, **changes: Any) -> "Params":
         """A copy with top-level fields replaced, validated."""

@@ -17,10 +17,12 @@ from companion.params import Params
 
 
 def paper_lqr(params: Params) -> LqrController:
-    """The LQR as printed: linearised at the desired state, u_d = u_h, no error clipping."""
+    """The LQR as printed: linearised at the desired state, u_d = u_h, no error clipping and
+    no keep-out barrier."""
     lqr = dataclasses.replace(params.lqr, linearize_at="desired", feedforward="person",
                               error_clip=(math.inf, math.inf, math.inf))
-    return LqrController(dataclasses.replace(params, lqr=lqr))
+    safety = dataclasses.replace(params.safety, person_clearance=0.0)
+    return LqrController(dataclasses.replace(params, lqr=lqr, safety=safety))
 
 
 CONTROLLERS: dict[str, Callable[[Params], Controller]] = {

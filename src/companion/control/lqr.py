@@ -11,7 +11,8 @@ Per sample period:
    robot towards the real one);
 5. solve the Riccati equation for ``K`` and apply ``u = u_d + u_e(k-1) - K xi`` (Eq. 16), clipped
    to the input limits; the stored ``u_e(k-1)`` is what was actually applied minus ``u_d``, so
-   saturation cannot wind it up.
+   saturation cannot wind it up;
+6. (ours) limit v by the person keep-out barrier (:mod:`companion.control.safety`).
 
 docs/model.md explains the choices and their measured effect.
 """
@@ -24,10 +25,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.control.base import Command, Observation, saturate
+from companion.control.safety import person_barrier
 from companion.kinematics import wrap_pi
 from companion.lqr import augment, dlqr
 from companion.model import discretize, jacobians, relative_state, slot_reference
 from companion.params import Params
+
+
+REST_SPEED = 0.5  # m/s, person speed assumed by the fallback gain
 
 
 @dataclass(frozen=True)
@@ -48,6 +53,14 @@ class LqrController:
         self._q = np.diag(params.lqr.q)
         self._r = np.diag(params.lqr.r)
         self._clip = np.array(params.lqr.error_clip)
+        f = params.formation
+        # Fallback gain for operating points without a stabilising Riccati solution (robot and
+        # person at rest: the heading mode is then uncontrollable in the linearisation). It is
+        # the gain at the desired slot for a person walking straight at REST_SPEED.
+        ref = slot_reference(REST_SPEED, 0.0, f.distance, f.bearing, params.robot.d)
+        self._rest_gain = self.gain(np.array([f.distance, f.bearing, ref.beta]),
+                                    np.array([ref.v, ref.omega]), np.array([REST_SPEED, 0.0]),
+                                    check=True)
         self.reset()
 
     def reset(self) -> None:
@@ -63,14 +76,18 @@ class LqrController:
         ref = slot_reference(v_h, omega_h, p.formation.distance, p.formation.bearing, p.robot.d)
         return ref.beta, ref.v, ref.omega
 
-    def gain(self, chi: np.ndarray, u: np.ndarray, w: np.ndarray) -> np.ndarray:
-        """LQR gain ``K`` of the augmented model linearised at ``(chi, u, w)``."""
+    def gain(self, chi: np.ndarray, u: np.ndarray, w: np.ndarray, check: bool = False
+             ) -> np.ndarray:
+        """LQR gain ``K`` of the augmented model linearised at ``(chi, u, w)``.
+
+        Raises ``numpy.linalg.LinAlgError`` where no stabilising gain exists.
+        """
         p = self.params
         lin = np.array([max(chi[0], p.lqr.rho_min), chi[1], chi[2]])
         jx, ju = jacobians(lin, u, w, p.robot.d)
         a, b = discretize(jx, ju, p.dt, p.lqr.discretization)
         a_bar, b_bar = augment(a, b)
-        k, _ = dlqr(a_bar, b_bar, self._q, self._r)
+        k, _ = dlqr(a_bar, b_bar, self._q, self._r, check=check)
         return k
 
     def step(self, obs: Observation) -> Command:
@@ -87,20 +104,17 @@ class LqrController:
         else:
             chi_lin, u_lin = np.array([rho, alpha, beta]), u_d + self._u_e_prev
         try:
-            k = self.gain(chi_lin, u_lin, w)
-            if not np.all(np.isfinite(k)):
-                raise np.linalg.LinAlgError("non-finite gain")
-            self._gain = k
+            self._gain = self.gain(chi_lin, u_lin, w)
         except (np.linalg.LinAlgError, ValueError):
-            # No stabilising Riccati solution at this operating point (e.g. robot and person
-            # both at rest: a mode is uncontrollable). Keep the last good gain; before the
-            # first one exists, linearise at the desired state instead.
+            # No stabilising Riccati solution here: keep the last good gain, or use the
+            # fallback computed at construction.
             if self._gain is None:
-                self._gain = self.gain(np.array([rho_d, alpha_d, beta_d]), u_d, w)
+                self._gain = self._rest_gain
         xi = np.concatenate([np.clip(chi_e, -self._clip, self._clip), self._u_e_prev])
         du = -self._gain @ xi
         u = u_d + self._u_e_prev + du
         v, om = saturate(float(u[0]), float(u[1]), p.robot)
+        v = person_barrier(v, r, h, p.safety, p.robot)
         self._u_e_prev = np.array([v, om]) - u_d
         self.last = LqrStep(xi=xi, gain=self._gain, u_d=(v_d, omega_d), beta_d=beta_d)
         return Command(v, om)

@@ -1,0 +1,299 @@
+"""Command-line interface: ``companion run | scenarios | convergence | pedestrians``.
+
+Bad usage or bad input files exit with code 2 and one line on stderr naming the file, line or
+key. Output files are written whole or not at all.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import sys
+from pathlib import Path
+from typing import Sequence
+
+from threadpoolctl import threadpool_limits
+
+import numpy as np
+
+from companion import metrics, plots
+from companion.control import CONTROLLERS, make_controller
+from companion.control.base import Pose
+from companion.data import pedestrians
+from companion.errors import CompanionError
+from companion.io import save_figure, write_csv, write_json
+from companion.model import SIDES
+from companion.params import Params, params_from_mapping
+from companion.config import load_toml
+from companion.sim import convergence
+from companion.sim.episode import LOG_COLUMNS, Log, run_episode
+from companion.sim.recorded import load_person_csv
+from companion.sim.scenario import Scenario, builtin_names, load_scenario
+
+
+class UsageError(CompanionError):
+    """Bad command-line usage."""
+
+
+def _floats(text: str, n: int, what: str) -> tuple[float, ...]:
+    parts = text.split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        raise UsageError(f"{what}: expected {n} comma-separated numbers, got {text!r}") from None
+    if len(values) != n or not all(math.isfinite(v) for v in values):
+        raise UsageError(f"{what}: expected {n} comma-separated finite numbers, got {text!r}")
+    return values
+
+
+def _positive(text: str, what: str) -> float:
+    (value,) = _floats(text, 1, what)
+    if value <= 0:
+        raise UsageError(f"{what}: expected a positive number, got {text!r}")
+    return value
+
+
+def _overrides(args: argparse.Namespace) -> dict:
+    """Parameter overrides from --params, --side, --bearing and --distance."""
+    over: dict = {}
+    if args.params:
+        over = load_toml(args.params)
+        params_from_mapping(over, prefix=f"{args.params}: ")  # validate with the file's name
+    formation = dict(over.get("formation", {}))
+    if args.side and args.bearing is not None:
+        raise UsageError("--side and --bearing: give one, not both")
+    if args.side:
+        formation["bearing"] = args.side
+    if args.bearing is not None:
+        (bearing,) = _floats(args.bearing, 1, "--bearing")
+        formation["bearing"] = bearing % (2.0 * math.pi)
+    if args.distance is not None:
+        formation["distance"] = _positive(args.distance, "--distance")
+    if formation:
+        over = dict(over, formation=formation)
+    return over
+
+
+def build_scenario(args: argparse.Namespace) -> Scenario:
+    sc = load_scenario(args.scenario, params_override=_overrides(args))
+    changes: dict = {}
+    if args.controller:
+        changes["controller"] = args.controller
+    if args.start:
+        changes["start"] = Pose(*_floats(args.start, 3, "--start"))
+    if args.person_csv:
+        person = load_person_csv(args.person_csv)
+        changes["person"] = person
+        changes["duration"] = person.duration
+    if args.duration:
+        changes["duration"] = _positive(args.duration, "--duration")
+    return dataclasses.replace(sc, **changes)
+
+
+def write_log(path: Path, log: Log) -> None:
+    cols = [log[c] for c in LOG_COLUMNS]
+    write_csv(path, LOG_COLUMNS, ([float(c[i]) for c in cols] for i in range(len(log))))
+
+
+def summary_lines(m: dict) -> list[str]:
+    settle = m["settling_time_s"]
+    return [
+        f"  RMSE rho   {m['rmse_rho_m']:.4f} m ({m['rmse_rho_m'] * 100:.3f} cm)",
+        f"  RMSE alpha {m['rmse_alpha_rad']:.4f} rad",
+        f"  RMSE beta  {m['rmse_beta_rad']:.4f} rad (against beta_d = 0; turns need an offset)",
+        f"  RMSV v     {m['rmsv_v_mps']:.4f} m/s,  RMSV omega {m['rmsv_omega_radps']:.4f} rad/s "
+        f"({m['rmsv_omega_radps'] * 1000:.2f} mrad/s)",
+        f"  min distance robot centre to person {m['min_person_distance_m']:.3f} m",
+        f"  settling time {'never' if settle is None else f'{settle:.2f} s'}",
+    ]
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    sc = build_scenario(args)
+    controller = make_controller(sc.controller, sc.params)
+    log = run_episode(controller, sc.person, sc.params, sc.duration, start=sc.start,
+                      seed=sc.seed)
+    m = metrics.compute(log)
+    m["scenario"] = sc.name
+    m["controller"] = sc.controller
+    out = Path(args.out or Path("out") / sc.name)
+    write_log(out / "log.csv", log)
+    write_json(out / "metrics.json", m)
+    print(f"{sc.name}: {sc.description}")
+    print(f"controller {sc.controller}, {sc.duration:g} s, side bearing "
+          f"{sc.params.formation.bearing:.4f} rad, distance {sc.params.formation.distance:g} m")
+    print("\n".join(summary_lines(m)))
+    written = ["log.csv", "metrics.json"]
+    if args.plot:
+        title = f"{sc.name} / {sc.controller}"
+        for name, fig in (("trajectory.png", plots.trajectory(log, title)),
+                          ("errors.png", plots.state_errors(log, title)),
+                          ("inputs.png", plots.inputs(log, sc.params, title))):
+            save_figure(fig, out / name)
+            plots.close(fig)
+            written.append(name)
+    print(f"wrote {', '.join(written)} in {out}")
+    return 0
+
+
+def cmd_scenarios(args: argparse.Namespace) -> int:
+    for name in builtin_names():
+        sc = load_scenario(name)
+        print(f"{name:10s} {sc.description}")
+    return 0
+
+
+def cmd_convergence(args: argparse.Namespace) -> int:
+    params = Params()
+    if args.params:
+        params = params_from_mapping(load_toml(args.params), prefix=f"{args.params}: ")
+    if args.controller not in CONTROLLERS:
+        make_controller(args.controller, params)  # raises with a hint
+    speeds = _floats(args.speeds, len(args.speeds.split(",")), "--speeds")
+    duration = _positive(args.duration, "--duration")
+    rows, runs, failures = [], {}, 0
+    print(f"{'speed':>5} {'start':>10} {'heading':>8} {'side':>5} {'settle_s':>9} "
+          f"{'min_dist_m':>10}")
+    for case in convergence.cases(speeds):
+        log, m = convergence.run_case(case, args.controller, params, duration)
+        settle = m["settling_time_s"]
+        ok = settle is not None and settle <= args.settle_limit \
+            and m["min_person_distance_m"] >= 0.5
+        failures += not ok
+        rows.append((case.speed, case.start.x, case.start.y, case.start.theta, case.side,
+                     "" if settle is None else settle, m["min_person_distance_m"], int(ok)))
+        runs.setdefault(case.speed, []).append((case.label, case.side, log))
+        print(f"{case.speed:5.2f} {case.label:>10} {case.start.theta:8.3f} {case.side:>5} "
+              f"{'never' if settle is None else f'{settle:.2f}':>9} "
+              f"{m['min_person_distance_m']:10.3f}{'' if ok else '  FAIL'}")
+    out = Path(args.out or Path("out") / "convergence")
+    write_csv(out / "convergence.csv", ("person_speed_mps", "start_x_m", "start_y_m",
+                                        "start_theta_rad", "side", "settling_time_s",
+                                        "min_person_distance_m", "ok"), rows)
+    written = ["convergence.csv"]
+    if args.plot:
+        for speed, speed_runs in runs.items():
+            fig = plots.convergence(speed_runs, f"Fig. 3: person at {speed:g} m/s, "
+                                                f"controller {args.controller}")
+            name = f"fig3_{speed:g}mps.png"
+            save_figure(fig, out / name)
+            plots.close(fig)
+            written.append(name)
+    print(f"{len(rows) - failures}/{len(rows)} runs settled within {args.settle_limit:g} s "
+          f"and kept >= 0.5 m from the person")
+    print(f"wrote {', '.join(written)} in {out}")
+    return 0 if failures == 0 else 1
+
+
+def cmd_pedestrians(args: argparse.Namespace) -> int:
+    params = Params()
+    if args.params:
+        params = params_from_mapping(load_toml(args.params), prefix=f"{args.params}: ")
+    if args.side:
+        params = params.replace(formation=dataclasses.replace(
+            params.formation, bearing=SIDES[args.side]))
+    tracks = pedestrians.select_tracks(pedestrians.load_scenes(args.data),
+                                       min_mean_speed=args.min_speed,
+                                       min_duration=args.min_duration)
+    if not tracks:
+        raise UsageError("no track is fast and long enough; lower --min-speed or --min-duration")
+    print(f"{len(tracks)} tracks (mean speed > {args.min_speed:g} m/s, >= "
+          f"{args.min_duration:g} s), controller {args.controller}; this takes about "
+          f"{len(tracks) // 3 + 1} s")
+    rows = pedestrians.evaluate_tracks(tracks, params, args.controller)
+    keys = ("scene", "ped_id", "duration_s", "mean_speed_mps", "rmse_rho_m", "rmse_alpha_rad",
+            "min_person_distance_m", "finite")
+    out = Path(args.out or Path("out") / "pedestrians")
+    write_csv(out / "pedestrians.csv", keys, ([r[k] for k in keys] for r in rows))
+    rho = np.median([r["rmse_rho_m"] for r in rows])
+    alpha = np.median([r["rmse_alpha_rad"] for r in rows])
+    closest = min(rows, key=lambda r: r["min_person_distance_m"])
+    print(f"median RMSE rho {rho:.4f} m, median RMSE alpha {alpha:.4f} rad")
+    print(f"closest approach {closest['min_person_distance_m']:.3f} m "
+          f"({closest['scene']} pedestrian {closest['ped_id']}); "
+          f"all finite: {all(r['finite'] for r in rows)}")
+    print(f"wrote pedestrians.csv in {out}\n")
+    print(pedestrians.CREDIT)
+    return 0
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """argparse, but usage errors are one line on stderr (exit code 2)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"companion: error: {self.prog}: {message} (see --help)\n")
+
+
+def parser() -> argparse.ArgumentParser:
+    ap = OneLineParser(prog="companion",
+                       description="Side-by-side companion robot control (LQR).")
+    sub = ap.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
+
+    run = sub.add_parser("run", help="simulate one scenario and write log.csv, metrics.json")
+    run.add_argument("scenario", help="built-in scenario name (see 'companion scenarios') "
+                                      "or a TOML file")
+    run.add_argument("--controller", choices=sorted(CONTROLLERS),
+                     help="controller (default: the scenario's)")
+    run.add_argument("--side", choices=sorted(SIDES), help="side of the person to walk on")
+    run.add_argument("--bearing", metavar="RAD", help="desired bearing alpha_d in rad "
+                     "(left pi/2, behind pi, right 3pi/2)")
+    run.add_argument("--distance", metavar="M", help="desired distance rho_d in m")
+    run.add_argument("--start", metavar="X,Y,THETA", help="robot start pose (m, m, rad); "
+                     "default: in the slot. Write --start=-1,2,0 when X is negative")
+    run.add_argument("--person-csv", metavar="FILE", help="CSV with header t,x,y replacing "
+                     "the scenario's person motion (duration: the recording's)")
+    run.add_argument("--duration", metavar="S", help="simulated time in s")
+    run.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides "
+                     "(docs/parameters.md)")
+    run.add_argument("--out", metavar="DIR", help="output folder (default out/SCENARIO)")
+    run.add_argument("--plot", action="store_true", help="also write trajectory.png, "
+                     "errors.png, inputs.png")
+    run.set_defaults(func=cmd_run)
+
+    sc = sub.add_parser("scenarios", help="list the built-in scenarios")
+    sc.set_defaults(func=cmd_scenarios)
+
+    cv = sub.add_parser("convergence", help="Fig. 3: 48 starts, settling and safety table")
+    cv.add_argument("--controller", default="lqr", choices=sorted(CONTROLLERS))
+    cv.add_argument("--speeds", default="0.5,1.0", metavar="V1,V2",
+                    help="person speeds in m/s (default 0.5,1.0)")
+    cv.add_argument("--duration", default="30", metavar="S", help="simulated time per run")
+    cv.add_argument("--settle-limit", type=float, default=20.0, metavar="S",
+                    help="a run must settle within this time (default 20 s)")
+    cv.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
+    cv.add_argument("--out", metavar="DIR", help="output folder (default out/convergence)")
+    cv.add_argument("--plot", action="store_true", help="write the Fig. 3 panels as PNG")
+    cv.set_defaults(func=cmd_convergence)
+
+    pd = sub.add_parser("pedestrians", help="our controller beside real walkers (ETH/UCY)")
+    pd.add_argument("--data", metavar="DIR", help="folder of the ETH/UCY files (default: "
+                    "../shared/data/pedestrians or $COMPANION_PEDESTRIANS)")
+    pd.add_argument("--controller", default="lqr", choices=sorted(CONTROLLERS))
+    pd.add_argument("--side", choices=sorted(SIDES), help="side (default: left)")
+    pd.add_argument("--min-speed", type=float, default=0.6, metavar="MPS",
+                    help="only tracks with a higher mean speed (default 0.6 m/s)")
+    pd.add_argument("--min-duration", type=float, default=15.0, metavar="S",
+                    help="only tracks at least this long (default 15 s)")
+    pd.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
+    pd.add_argument("--out", metavar="DIR", help="output folder (default out/pedestrians)")
+    pd.set_defaults(func=cmd_pedestrians)
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = parser()
+    args = ap.parse_args(argv)
+    try:
+        # The controller's matrices are 5x5: BLAS threads only cost hand-over time.
+        with threadpool_limits(limits=1):
+            return args.func(args)
+    except CompanionError as exc:
+        print(f"companion: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Loaders for external data sets (recorded pedestrian tracks)."""

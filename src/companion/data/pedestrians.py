@@ -1,0 +1,277 @@
+"""Real pedestrian walking tracks (ETH and UCY data sets) as target persons.
+
+The files live outside the repository, in ``../shared/data/pedestrians`` (see its README.md and
+:func:`default_data_dir`). Each scene file has one observation per line, tab separated:
+``frame ped_id x y`` (frames and ids written as floats, x and y in metres); time is
+``frame / 25`` s and each pedestrian has one row every 0.4 s. Every scene has its own frame.
+
+Typical use::
+
+    tracks = select_tracks(load_scenes())
+    rows = evaluate_tracks(tracks, Params())
+
+Any result computed on these data must carry the credit in :data:`CREDIT`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Mapping
+
+import numpy as np
+
+from companion.control import make_controller
+from companion.errors import DataError
+from companion.metrics import compute
+from companion.params import Params
+from companion.sim.episode import run_episode
+from companion.sim.recorded import DEFAULT_SMOOTHING, RecordedPerson
+
+#: Frames per second of the ETH/UCY annotations: time = frame / FRAME_RATE.
+FRAME_RATE = 25.0
+#: Environment variable that overrides :func:`default_data_dir`.
+ENV_VAR = "COMPANION_PEDESTRIANS"
+#: Location of the data relative to an ancestor of the package or of the working directory.
+RELATIVE_DIR = Path("shared", "data", "pedestrians")
+#: Scene name -> file inside the data directory.
+SCENES = {
+    "hotel": Path("hotel", "biwi_hotel.txt"),
+    "zara1": Path("zara1", "crowds_zara01.txt"),
+    "students003": Path("students003", "students003.txt"),
+}
+
+CREDIT = """\
+Pedestrian tracks from the ETH and UCY data sets:
+- ETH: S. Pellegrini, A. Ess, K. Schindler, L. Van Gool, "You'll never walk alone: modeling \
+social behavior for multi-target tracking", ICCV 2009. No license is stated with this data set.
+- UCY: A. Lerner, Y. Chrysanthou, D. Lischinski, "Crowds by example", Computer Graphics Forum \
+2007. The authors state the data are free for use as long as credit is given to the original \
+uploaders.
+- The metre-unit text files are the versions distributed with the public Trajectron++ \
+repository (StanfordASL/Trajectron-plus-plus, folder experiments/pedestrians/raw/raw/all_data), \
+identical to the Social-GAN splits.
+"""
+
+
+@dataclass(frozen=True, eq=False)
+class Track:
+    """One pedestrian's track: times (s, as in the file) and positions (m), read-only arrays."""
+
+    scene: str
+    ped_id: int
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+
+    @property
+    def duration(self) -> float:
+        """Time (s) from the first to the last sample."""
+        return float(self.t[-1] - self.t[0])
+
+    @property
+    def mean_speed(self) -> float:
+        """Length of the sampled path divided by its duration (m/s); 0 for a single sample."""
+        if self.duration <= 0.0:
+            return 0.0
+        return float(np.sum(np.hypot(np.diff(self.x), np.diff(self.y)))) / self.duration
+
+
+def default_data_dir(search_from: Iterable[str | Path] | None = None) -> Path | None:
+    """The pedestrian data directory, or None if it is not found.
+
+    The environment variable ``COMPANION_PEDESTRIANS``, if set and not empty, wins. Otherwise
+    the first existing ``<ancestor>/shared/data/pedestrians`` is returned, trying each
+    directory of ``search_from`` and its ancestors in turn (default: this package's directory,
+    then the working directory); for a checkout at ``<root>/main`` that is
+    ``<root>/shared/data/pedestrians``, i.e. ``../shared/data/pedestrians`` relative to the
+    repository.
+
+    Raises
+    ------
+    DataError
+        If ``COMPANION_PEDESTRIANS`` is set but is not a directory.
+    """
+    override = os.environ.get(ENV_VAR)
+    if override:
+        path = Path(override)
+        if not path.is_dir():
+            raise DataError(f"{ENV_VAR}={override}: not a directory")
+        return path
+    if search_from is None:
+        search_from = (Path(__file__).parent, Path.cwd())
+    for start in search_from:
+        start = Path(start).resolve()
+        for ancestor in (start, *start.parents):
+            candidate = ancestor / RELATIVE_DIR
+            if candidate.is_dir():
+                return candidate
+    return None
+
+
+def load_tracks(path: str | Path, scene: str | None = None) -> dict[int, Track]:
+    """Read one ETH/UCY scene file.
+
+    Parameters
+    ----------
+    path : str or Path
+        Tab- (or space-) separated ``frame ped_id x y`` lines; blank lines are skipped. The
+        rows of one pedestrian must have strictly increasing frames; gaps are allowed.
+    scene : str, optional
+        Name stored in each :class:`Track`; default: the file name without extension.
+
+    Returns
+    -------
+    dict
+        Pedestrian id -> :class:`Track`, in order of first appearance.
+
+    Raises
+    ------
+    DataError
+        With a one-line message naming the file and line, e.g.
+        ``zara.txt:12: column 'x': expected a number, got 'abc'``.
+    """
+    name = str(path)
+    rows: dict[int, list[tuple[float, float, float]]] = {}
+    last_line: dict[int, int] = {}
+    try:
+        with open(path, encoding="utf-8") as f:
+            for line_no, line in enumerate(f, start=1):
+                if not line.strip():
+                    continue
+                frame, ped, x, y = _parse_line(name, line_no, line)
+                _check_order(name, line_no, ped, frame, rows.get(ped), last_line.get(ped))
+                rows.setdefault(ped, []).append((frame / FRAME_RATE, x, y))
+                last_line[ped] = line_no
+    except OSError as e:
+        raise DataError(f"{name}: cannot read file: {e.strerror or e}") from None
+    except UnicodeDecodeError as e:
+        raise DataError(f"{name}: not a UTF-8 text file ({e.reason})") from None
+    if not rows:
+        raise DataError(f"{name}:1: expected lines 'frame ped_id x y', the file is empty")
+    scene = Path(path).stem if scene is None else scene
+    return {ped: _make_track(scene, ped, samples) for ped, samples in rows.items()}
+
+
+_COLUMNS = ("frame", "ped_id", "x", "y")
+
+
+def _parse_line(name: str, line_no: int, line: str) -> tuple[float, int, float, float]:
+    cells = line.split()
+    if len(cells) != len(_COLUMNS):
+        raise DataError(f"{name}:{line_no}: expected 4 values (frame ped_id x y), "
+                        f"got {len(cells)}")
+    values = []
+    for col, cell in zip(_COLUMNS, cells):
+        try:
+            value = float(cell)
+        except ValueError:
+            raise DataError(f"{name}:{line_no}: column '{col}': expected a number, "
+                            f"got {cell!r}") from None
+        if not math.isfinite(value):
+            raise DataError(f"{name}:{line_no}: column '{col}': expected a finite number, "
+                            f"got {cell!r}")
+        values.append(value)
+    frame, ped, x, y = values
+    for col, value in (("frame", frame), ("ped_id", ped)):
+        if value != int(value) or value < 0:
+            raise DataError(f"{name}:{line_no}: column '{col}': expected a whole number >= 0, "
+                            f"got {value:g}")
+    return frame, int(ped), x, y
+
+
+def _check_order(name: str, line_no: int, ped: int, frame: float,
+                 previous: list[tuple[float, float, float]] | None,
+                 previous_line: int | None) -> None:
+    if not previous:
+        return
+    prev_frame = previous[-1][0] * FRAME_RATE
+    if frame <= prev_frame:
+        kind = "duplicate" if frame == prev_frame else "unsorted"
+        raise DataError(f"{name}:{line_no}: column 'frame': {kind} frame {frame:g} for "
+                        f"pedestrian {ped}, expected a frame after {prev_frame:g} "
+                        f"(line {previous_line})")
+
+
+def _make_track(scene: str, ped: int, samples: list[tuple[float, float, float]]) -> Track:
+    table = np.array(samples, dtype=float)
+    t, x, y = (np.ascontiguousarray(table[:, k]) for k in range(3))
+    for a in (t, x, y):
+        a.setflags(write=False)
+    return Track(scene, ped, t, x, y)
+
+
+def load_scene(scene: str, data_dir: str | Path | None = None) -> dict[int, Track]:
+    """Load the tracks of one scene of :data:`SCENES` from ``data_dir``.
+
+    ``data_dir`` defaults to :func:`default_data_dir`; DataError if it is not found or the
+    scene is unknown.
+    """
+    if scene not in SCENES:
+        raise DataError(f"scene: unknown scene {scene!r} (known: {', '.join(SCENES)})")
+    return load_tracks(_resolve_dir(data_dir) / SCENES[scene], scene=scene)
+
+
+def load_scenes(data_dir: str | Path | None = None,
+                scenes: Iterable[str] = tuple(SCENES)) -> list[Track]:
+    """All tracks of ``scenes`` (default: all of :data:`SCENES`), scene by scene."""
+    root = _resolve_dir(data_dir)
+    return [track for scene in scenes for track in load_scene(scene, root).values()]
+
+
+def _resolve_dir(data_dir: str | Path | None) -> Path:
+    if data_dir is not None:
+        return Path(data_dir)
+    found = default_data_dir()
+    if found is None:
+        raise DataError(f"pedestrian data not found: expected a directory "
+                        f"{RELATIVE_DIR} next to the repository, or set {ENV_VAR}")
+    return found
+
+
+def select_tracks(tracks: Mapping[int, Track] | Iterable[Track], min_mean_speed: float = 0.6,
+                  min_duration: float = 15.0) -> list[Track]:
+    """Tracks of walking people: ``mean_speed > min_mean_speed`` (m/s) and
+    ``duration >= min_duration`` (s), in their original order."""
+    items = tracks.values() if isinstance(tracks, Mapping) else tracks
+    return [tr for tr in items
+            if tr.mean_speed > min_mean_speed and tr.duration >= min_duration]
+
+
+def evaluate_tracks(tracks: Iterable[Track], params: Params, controller_name: str = "lqr",
+                    smoothing: float = DEFAULT_SMOOTHING) -> list[dict]:
+    """Run the companion controller beside each track's person and summarise each episode.
+
+    For each track the person is a :class:`~companion.sim.recorded.RecordedPerson`
+    (smoothing time constant ``smoothing`` s), the robot starts in its slot aligned with the
+    person (``params.formation``; the default is 1 m on the left) and the episode lasts the
+    track's duration.
+
+    Returns
+    -------
+    list of dict
+        One row per track: ``scene``, ``ped_id``, ``duration_s``, ``mean_speed_mps`` (raw
+        track), ``max_person_speed_mps`` (smoothed), and the metrics ``rmse_rho_m``,
+        ``rmse_alpha_rad``, ``min_person_distance_m`` and ``finite`` of
+        :func:`companion.metrics.compute`.
+    """
+    rows = []
+    for track in tracks:
+        person = RecordedPerson(track.t, track.x, track.y, smoothing=smoothing)
+        log = run_episode(make_controller(controller_name, params), person, params,
+                          duration=person.duration, start=None)
+        metrics = compute(log)
+        rows.append({
+            "scene": track.scene,
+            "ped_id": track.ped_id,
+            "duration_s": track.duration,
+            "mean_speed_mps": track.mean_speed,
+            "max_person_speed_mps": float(np.max(log["person_v"])),
+            "rmse_rho_m": metrics["rmse_rho_m"],
+            "rmse_alpha_rad": metrics["rmse_alpha_rad"],
+            "min_person_distance_m": metrics["min_person_distance_m"],
+            "finite": metrics["finite"],
+        })
+    return rows

@@ -1,0 +1,241 @@
+"""Scenarios as TOML data files: the person's motion, the robot start, the controller and the
+parameters of one episode. Built-in scenarios ship in ``companion/scenarios/``.
+
+Example::
+
+    name = "figure8"
+    description = "8-shaped walk of Eq. (23), one lap in 60 s; robot on the right"
+    duration = 60.0          # s
+    controller = "lqr"
+    seed = 0
+
+    [person]                 # kind: line | circle | figure8 | ushape | segments | csv
+    kind = "figure8"
+    lap_time = 60.0
+
+    [robot]
+    start = [5.0, 2.0, 0.0]  # optional x (m), y (m), theta (rad); default: in the slot
+
+    [params.formation]       # any Params field (docs/parameters.md)
+    bearing = "right"        # or "auto": the side the robot starts on (needs robot.start)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any, Mapping
+
+from companion.config import build, convert, hint, load_toml, param, positive, reject_unknown
+from companion.control.base import Pose
+from companion.errors import ConfigError
+from companion.model import LEFT, RIGHT, relative_state
+from companion.params import Params, params_from_mapping
+from companion.sim.person import Figure8, PersonMotion, Segment, SegmentPath, circle, line, u_shape
+from companion.sim.recorded import load_person_csv
+
+Triple = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class LineSpec:
+    start: Triple = param((0.0, 0.0, 0.0), "m, m, rad", "start pose x, y, heading")
+    speed: float = param(1.0, "m/s", "walking speed", positive)
+
+
+@dataclass(frozen=True)
+class CircleSpec:
+    start: Triple = param((0.0, 0.0, 0.0), "m, m, rad", "start pose x, y, heading")
+    radius: float = param(3.0, "m", "circle radius", positive)
+    speed: float = param(1.0, "m/s", "walking speed", positive)
+    turn: str = param("left", "-", "turn direction", choices=("left", "right"))
+
+
+@dataclass(frozen=True)
+class Figure8Spec:
+    lap_time: float = param(60.0, "s", "time for one lap of Eq. (23)", positive)
+    phase: float = param(0.0, "rad", "phase of Eq. (23) at t = 0 (0: at (5, 3) walking +x)")
+
+
+@dataclass(frozen=True)
+class UShapeSpec:
+    start: Triple = param((0.0, 0.0, 0.0), "m, m, rad", "start pose x, y, heading")
+    radius: float = param(2.0, "m", "radius of the half circle", positive)
+    turn: str = param("left", "-", "turn direction", choices=("left", "right"))
+
+
+def _non_negative_speed(x: float) -> str | None:
+    return None if 0.0 <= x < math.inf else "a finite speed >= 0"
+
+
+@dataclass(frozen=True)
+class SegmentSpec:
+    duration: float = param(1.0, "s", "segment duration", positive)
+    v_start: float = param(1.0, "m/s", "speed at the segment start", _non_negative_speed)
+    v_end: float = param(1.0, "m/s", "speed at the segment end", _non_negative_speed)
+    curvature: float = param(0.0, "1/m", "signed curvature, positive turns left")
+
+
+@dataclass(frozen=True)
+class SegmentsSpec:
+    start: Triple = param((0.0, 0.0, 0.0), "m, m, rad", "start pose x, y, heading")
+    segments: tuple[SegmentSpec, ...] = param((), "-", "the segments, in order")
+
+
+@dataclass(frozen=True)
+class CsvSpec:
+    path: str = param("", "-", "CSV file with header t,x,y; relative to the scenario file")
+
+
+PERSON_KINDS: dict[str, type] = {"line": LineSpec, "circle": CircleSpec, "figure8": Figure8Spec,
+                                 "ushape": UShapeSpec, "segments": SegmentsSpec, "csv": CsvSpec}
+
+
+def make_person(spec: Any, base_dir: Path) -> PersonMotion:
+    """The person motion described by a validated spec."""
+    if isinstance(spec, LineSpec):
+        return line(spec.start, spec.speed)
+    if isinstance(spec, CircleSpec):
+        return circle(spec.start, spec.radius, spec.speed, spec.turn)
+    if isinstance(spec, Figure8Spec):
+        return Figure8(spec.lap_time, spec.phase)
+    if isinstance(spec, UShapeSpec):
+        return u_shape(spec.start, spec.radius, spec.turn)
+    if isinstance(spec, SegmentsSpec):
+        return SegmentPath(spec.start, [Segment(s.duration, s.v_start, s.v_end, s.curvature)
+                                        for s in spec.segments])
+    if isinstance(spec, CsvSpec):
+        return load_person_csv(base_dir / spec.path)
+    raise TypeError(f"make_person: unknown spec {spec!r}")
+
+
+def person_from_mapping(mapping: Any, where: str, base_dir: Path) -> PersonMotion:
+    if not isinstance(mapping, Mapping):
+        raise ConfigError(f"{where}person: expected a table")
+    kind = mapping.get("kind")
+    if kind not in PERSON_KINDS:
+        raise ConfigError(f"{where}person.kind: expected one of "
+                          f"{', '.join(map(repr, PERSON_KINDS))}, got {kind!r}")
+    rest = {k: v for k, v in mapping.items() if k != "kind"}
+    spec = build(PERSON_KINDS[kind], rest, prefix=f"{where}person.")
+    if isinstance(spec, SegmentsSpec) and not spec.segments:
+        raise ConfigError(f"{where}person.segments: expected at least one [[person.segments]]")
+    if isinstance(spec, CsvSpec) and not spec.path:
+        raise ConfigError(f"{where}person.path: expected the path of a CSV file")
+    return make_person(spec, base_dir)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One episode's set-up. ``start`` None means: start in the slot, aligned with the person."""
+
+    name: str
+    description: str
+    duration: float
+    seed: int
+    controller: str
+    person: PersonMotion
+    start: Pose | None
+    params: Params
+    source: str
+
+
+TOP_KEYS = ("name", "description", "duration", "seed", "controller", "person", "robot", "params")
+
+
+def _resolve_auto_side(params_map: dict, start: Pose | None, person: PersonMotion,
+                       where: str) -> dict:
+    formation = params_map.get("formation")
+    if not (isinstance(formation, Mapping) and formation.get("bearing") == "auto"):
+        return params_map
+    if start is None:
+        raise ConfigError(f"{where}params.formation.bearing: 'auto' needs robot.start")
+    h = person.state(0.0)
+    d = params_map.get("robot", {}).get("d", Params().robot.d)
+    _, alpha, _ = relative_state(start.x, start.y, start.theta, h.x, h.y, h.theta, d)
+    formation = dict(formation, bearing=LEFT if alpha < math.pi else RIGHT)
+    return dict(params_map, formation=formation)
+
+
+def deep_merge(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
+    """``base`` updated by ``over``, recursing into tables."""
+    out = dict(base)
+    for k, v in over.items():
+        if isinstance(v, Mapping) and isinstance(out.get(k), Mapping):
+            out[k] = deep_merge(out[k], v)
+        else:
+            out[k] = v
+    return out
+
+
+def scenario_from_mapping(data: Mapping[str, Any], source: str, base_dir: Path,
+                          params_override: Mapping[str, Any] | None = None) -> Scenario:
+    """Build a validated :class:`Scenario`; errors are prefixed with ``source``."""
+    where = f"{source}: "
+    reject_unknown(data, TOP_KEYS, where)
+    name = data.get("name", Path(source).stem)
+    if not isinstance(name, str):
+        raise ConfigError(f"{where}name: expected a string")
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise ConfigError(f"{where}description: expected a string")
+    duration = data.get("duration", 60.0)
+    if isinstance(duration, bool) or not isinstance(duration, (int, float)) \
+            or not 0.0 < duration < math.inf:
+        raise ConfigError(f"{where}duration: expected a positive number of seconds, "
+                          f"got {duration!r}")
+    seed = data.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ConfigError(f"{where}seed: expected an integer >= 0, got {seed!r}")
+    controller = data.get("controller", "lqr")
+    if not isinstance(controller, str):
+        raise ConfigError(f"{where}controller: expected a controller name")
+    if "person" not in data:
+        raise ConfigError(f"{where}person: missing table [person]")
+    person = person_from_mapping(data["person"], where, base_dir)
+    robot = data.get("robot", {})
+    if not isinstance(robot, Mapping):
+        raise ConfigError(f"{where}robot: expected a table")
+    reject_unknown(robot, ("start",), f"{where}robot.")
+    start = None
+    if "start" in robot:
+        start = Pose(*convert(robot["start"], Triple, f"{where}robot.start"))
+    params_map = data.get("params", {})
+    if not isinstance(params_map, Mapping):
+        raise ConfigError(f"{where}params: expected a table")
+    if params_override:
+        params_map = deep_merge(params_map, params_override)
+    params_map = _resolve_auto_side(dict(params_map), start, person, where)
+    params = params_from_mapping(params_map, prefix=f"{where}params.")
+    return Scenario(name, description, float(duration), seed, controller, person, start,
+                    params, source)
+
+
+def builtin_names() -> list[str]:
+    """Names of the scenarios shipped with the package."""
+    folder = resources.files("companion") / "scenarios"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def builtin_path(name: str) -> Path:
+    return Path(str(resources.files("companion") / "scenarios" / f"{name}.toml"))
+
+
+def load_scenario(name_or_path: str, params_override: Mapping[str, Any] | None = None
+                  ) -> Scenario:
+    """Load a built-in scenario by name, or a TOML file by path."""
+    path = Path(name_or_path)
+    if not path.suffix and not path.exists():
+        names = builtin_names()
+        if name_or_path not in names:
+            raise ConfigError(f"{name_or_path}: no built-in scenario of that name"
+                              f"{hint(name_or_path, names)} (built-in: {', '.join(names)})")
+        path = builtin_path(name_or_path)
+    return scenario_from_mapping(load_toml(path), str(path), path.parent, params_override)
+
+
+def with_changes(sc: Scenario, **changes: Any) -> Scenario:
+    return dataclasses.replace(sc, **changes)

@@ -1,0 +1,158 @@
+import json
+import math
+import csv
+
+import pytest
+
+from companion.cli import main
+from companion.sim.episode import LOG_COLUMNS
+
+METRIC_KEYS = {"rmse_rho_m", "rmse_alpha_rad", "rmse_beta_rad", "rmsv_v_mps",
+               "rmsv_omega_radps", "min_person_distance_m", "settling_time_s",
+               "final_abs_error"}
+
+
+def run(argv, capsys):
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse usage errors
+        code = exc.code
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_run_writes_log_metrics_and_plots(tmp_path, capsys):
+    code, out, _ = run(["run", "line", "--duration", "3", "--out", str(tmp_path), "--plot"],
+                       capsys)
+    assert code == 0
+    assert "RMSE rho" in out
+    with open(tmp_path / "log.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert set(LOG_COLUMNS) <= set(rows[0])
+    assert len(rows) == 60
+    m = json.loads((tmp_path / "metrics.json").read_text())
+    assert METRIC_KEYS <= set(m)
+    assert set(m["final_abs_error"]) == {"rho_m", "alpha_rad", "beta_rad"}
+    assert m["rmse_rho_m"] < 1e-6  # starts in its slot on a straight line
+    for name in ("trajectory.png", "errors.png", "inputs.png"):
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_side_distance_start_and_controller(tmp_path, capsys):
+    code, _, _ = run(["run", "line", "--side", "right", "--distance", "1.5",
+                      "--start=-3,-2,0.5", "--duration", "25", "--controller", "lqr",
+                      "--out", str(tmp_path)], capsys)
+    assert code == 0
+    with open(tmp_path / "log.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert (float(rows[0]["robot_x"]), float(rows[0]["robot_y"])) == (-3.0, -2.0)
+    last = rows[-1]
+    assert float(last["rho"]) == pytest.approx(1.5, abs=0.02)
+    assert float(last["alpha"]) == pytest.approx(1.5 * math.pi, abs=0.02)
+
+
+def test_bearing_option(tmp_path, capsys):
+    code, _, _ = run(["run", "line", "--bearing", "3.14159", "--duration", "1",
+                      "--out", str(tmp_path)], capsys)
+    assert code == 0
+    with open(tmp_path / "log.csv") as fh:
+        first = next(csv.DictReader(fh))
+    assert float(first["alpha_d"]) == pytest.approx(3.14159)
+
+
+def test_person_csv(tmp_path, capsys):
+    f = tmp_path / "walk.csv"
+    lines = ["t,x,y"] + [f"{0.4 * i:.1f},{0.4 * i * 1.1:.4f},0" for i in range(60)]
+    f.write_text("\n".join(lines) + "\n")
+    code, out, _ = run(["run", "line", "--person-csv", str(f), "--out", str(tmp_path / "o")],
+                       capsys)
+    assert code == 0
+    m = json.loads((tmp_path / "o" / "metrics.json").read_text())
+    assert m["duration_s"] == pytest.approx(23.6, abs=0.06)
+    assert m["min_person_distance_m"] > 0.9
+
+
+def test_scenarios_lists_builtins(capsys):
+    code, out, _ = run(["scenarios"], capsys)
+    assert code == 0
+    names = {line.split()[0] for line in out.splitlines()}
+    assert {"fig3", "line", "circle", "figure8", "ushape"} <= names
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["run", "nosuch"], "nosuch: no built-in scenario"),
+    (["run", "figur8"], "did you mean 'figure8'"),
+    (["run", "line", "--start", "1,2"], "--start: expected 3 comma-separated"),
+    (["run", "line", "--distance", "-1"], "--distance: expected a positive number"),
+    (["run", "line", "--duration", "abc"], "--duration: expected 1 comma-separated"),
+    (["run", "line", "--side", "left", "--bearing", "1"], "give one, not both"),
+    (["run", "line", "--person-csv", "/nonexistent/walk.csv"], "walk.csv"),
+    (["run", "line", "--side", "up"], "invalid choice: 'up'"),
+    (["run", "line", "--start", "-1,2,0"], "--start: expected one argument"),
+    (["run"], "the following arguments are required: scenario"),
+])
+def test_bad_usage_exits_2_with_one_line(argv, message, capsys, tmp_path):
+    code, out, err = run(argv + ["--out", str(tmp_path)], capsys)
+    assert code == 2
+    assert message in err
+    assert err.count("\n") == 1
+    assert not (tmp_path / "log.csv").exists()
+
+
+@pytest.mark.parametrize("text, message", [
+    ('name = "x"\n[person]\nkind = "line"\nspeed = -1\n', "person.speed: expected a finite positive"),
+    ('[person]\nkind = "lin"\n', "person.kind: expected one of"),
+    ('[person]\nkind = "line"\nspede = 1\n', "person.spede: unknown key; did you mean 'speed'"),
+    ('duraton = 3\n[person]\nkind = "line"\n', "duraton: unknown key; did you mean 'duration'"),
+    ('[person]\nkind = "line"\n[params.lqr]\nq = [1, 2]\n', "params.lqr.q: expected 5 values"),
+    ('[person]\nkind = "line"\n[params.formation]\nbearing = "auto"\n', "'auto' needs robot.start"),
+    ('[person]\nkind = "csv"\npath = "missing.csv"\n', "missing.csv: cannot read file"),
+    ('[person\nkind = "line"\n', "invalid TOML"),
+    ('duration = 3\n', "person: missing table"),
+])
+def test_bad_scenario_file(tmp_path, capsys, text, message):
+    f = tmp_path / "bad.toml"
+    f.write_text(text)
+    code, _, err = run(["run", str(f), "--out", str(tmp_path / "o")], capsys)
+    assert code == 2
+    assert message in err
+    assert "bad.toml" in err or "missing.csv" in message  # names the file that is wrong
+    assert err.count("\n") == 1
+    assert not (tmp_path / "o").exists()
+
+
+def test_custom_scenario_segments(tmp_path, capsys):
+    f = tmp_path / "walk.toml"
+    f.write_text('name = "walk"\nduration = 10\n[person]\nkind = "segments"\nstart = [0, 0, 0]\n'
+                 '[[person.segments]]\nduration = 5\nv_start = 0.5\nv_end = 1.0\n'
+                 '[[person.segments]]\nduration = 5\nv_start = 1.0\nv_end = 1.0\ncurvature = 0.2\n'
+                 '[robot]\nstart = [-1, -1, 0]\n[params.formation]\nbearing = "auto"\n')
+    code, out, _ = run(["run", str(f), "--out", str(tmp_path / "o")], capsys)
+    assert code == 0
+    with open(tmp_path / "o" / "log.csv") as fh:
+        first = next(csv.DictReader(fh))
+    assert float(first["alpha_d"]) == pytest.approx(1.5 * math.pi)  # started on the right
+
+
+def test_params_file_override(tmp_path, capsys):
+    f = tmp_path / "p.toml"
+    f.write_text("[formation]\ndistance = 2.0\n")
+    code, _, _ = run(["run", "line", "--params", str(f), "--duration", "1",
+                      "--out", str(tmp_path / "o")], capsys)
+    assert code == 0
+    with open(tmp_path / "o" / "log.csv") as fh:
+        assert float(next(csv.DictReader(fh))["rho_d"]) == 2.0
+    f.write_text("[formation]\ndistanc = 2.0\n")
+    code, _, err = run(["run", "line", "--params", str(f), "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and "p.toml: formation.distanc: unknown key; did you mean 'distance'" in err
+
+
+def test_readme_test_command_is_what_ci_runs():
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1]
+    readme = (root / "README.md").read_text()
+    ci = (root / ".ci" / "run").read_text()
+    test_cmd = [l for l in readme.splitlines() if "pytest" in l and l.startswith("python3")]
+    assert len(test_cmd) == 1
+    assert test_cmd[0] in ci.splitlines()
