@@ -23,22 +23,25 @@ from companion.sim.episode import run_episode
 from companion.sim.scenario import load_scenario
 
 INF = (math.inf, math.inf, math.inf)
+PAPER = dict(linearize_at="desired", feedforward="person", error_clip=INF, clearance=0.0)
 VARIANTS = {
-    "paper (desired, u_h, no clip)": dict(linearize_at="desired", feedforward="person",
-                                          error_clip=INF),
-    "+ measured linearisation": dict(linearize_at="measured", feedforward="person",
-                                     error_clip=INF),
-    "+ geometric feedforward": dict(linearize_at="measured", feedforward="geometric",
-                                    error_clip=INF),
-    "+ error clip = ours": dict(),
+    "paper (lqr-paper)": PAPER,
+    "+ measured linearisation": dict(PAPER, linearize_at="measured"),
+    "+ geometric feedforward": dict(PAPER, linearize_at="measured", feedforward="geometric"),
+    "+ error clip": dict(linearize_at="measured", feedforward="geometric", clearance=0.0),
+    "+ keep-out barrier = ours (lqr)": dict(),
     "ours without geometric ff": dict(feedforward="person"),
     "ours with desired linearisation": dict(linearize_at="desired"),
-    "ours with zoh": dict(discretization="zoh"),
+    "ours with zoh discretisation": dict(discretization="zoh"),
 }
 
 
-def with_lqr(params: Params, **lqr) -> Params:
-    return dataclasses.replace(params, lqr=dataclasses.replace(params.lqr, **lqr))
+def with_lqr(params: Params, clearance: float | None = None, **lqr) -> Params:
+    """``params`` with LQR fields replaced and, if given, the barrier's person_clearance."""
+    safety = params.safety if clearance is None else dataclasses.replace(
+        params.safety, person_clearance=clearance)
+    return dataclasses.replace(params, lqr=dataclasses.replace(params.lqr, **lqr),
+                               safety=safety)
 
 
 def fig3(lqr: dict) -> tuple[int, float, float]:

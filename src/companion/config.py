@@ -120,6 +120,19 @@ def convert(value: Any, tp: Any, name: str) -> Any:
     raise TypeError(f"convert: unsupported field type {tp!r} for {name}")  # programming error
 
 
+def _check_field(f: dataclasses.Field, value: Any, name: str) -> None:
+    """Apply a field's ``choices`` and ``check`` metadata to an already converted value."""
+    choices = f.metadata.get("choices")
+    if choices and value not in choices:
+        raise ConfigError(f"{name}: expected one of {', '.join(map(repr, choices))}, "
+                          f"got {value!r}{hint(str(value), choices)}")
+    check = f.metadata.get("check")
+    if check is not None and value is not None:
+        problem = check(value)
+        if problem:
+            raise ConfigError(f"{name}: expected {problem}, got {value!r}")
+
+
 def build(cls: type[T], mapping: Mapping[str, Any], prefix: str = "") -> T:
     """Build the config dataclass ``cls`` from ``mapping``, validating every key and value.
 
@@ -134,15 +147,7 @@ def build(cls: type[T], mapping: Mapping[str, Any], prefix: str = "") -> T:
         f = fields[key]
         name = f"{prefix}{key}"
         converted = convert(value, hints[key], name)
-        choices = f.metadata.get("choices")
-        if choices and converted not in choices:
-            raise ConfigError(f"{name}: expected one of {', '.join(map(repr, choices))}, "
-                              f"got {converted!r}{hint(str(converted), choices)}")
-        check = f.metadata.get("check")
-        if check is not None and converted is not None:
-            problem = check(converted)
-            if problem:
-                raise ConfigError(f"{name}: expected {problem}, got {value!r}")
+        _check_field(f, converted, name)
         kwargs[key] = converted
     return cls(**kwargs)
 
@@ -157,15 +162,7 @@ def validate(obj: Any, prefix: str = "") -> None:
             validate(value, prefix=f"{name}.")
             continue
         convert(list(value) if isinstance(value, tuple) else value, hints[f.name], name)
-        choices = f.metadata.get("choices")
-        if choices and value not in choices:
-            raise ConfigError(f"{name}: expected one of {', '.join(map(repr, choices))}, "
-                              f"got {value!r}{hint(str(value), choices)}")
-        check = f.metadata.get("check")
-        if check is not None and value is not None:
-            problem = check(value)
-            if problem:
-                raise ConfigError(f"{name}: expected {problem}, got {value!r}")
+        _check_field(f, value, name)
 
 
 def load_toml(path: str | Path) -> dict[str, Any]:

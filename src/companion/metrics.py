@@ -59,6 +59,12 @@ def settling_time(log: Log, tol: Tolerance = Tolerance()) -> float | None:
     return float(log["t"][first])
 
 
+def _duration(log: Log) -> float:
+    """Simulated time covered by the log: the last sample plus one period."""
+    t = log["t"]
+    return float(t[-1] + (t[1] - t[0])) if len(t) > 1 else 0.0
+
+
 def compute(log: Log, tol: Tolerance = Tolerance()) -> dict:
     """All metrics as a JSON-ready dict (SI units; key names carry the unit)."""
     e = errors(log)
@@ -77,7 +83,7 @@ def compute(log: Log, tol: Tolerance = Tolerance()) -> dict:
             "alpha_rad": float(abs(e["alpha"][-1])),
             "beta_rad": float(abs(e["beta_ref"][-1])),
         },
-        "duration_s": float(log["t"][-1] + (log["t"][1] - log["t"][0]) if len(log) > 1 else 0.0),
+        "duration_s": _duration(log),
         "steps": len(log),
     }
     finite = all(math.isfinite(v) for v in (values["rmse_rho_m"], values["rmse_alpha_rad"]))

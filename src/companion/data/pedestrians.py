@@ -15,7 +15,6 @@ Any result computed on these data must carry the credit in :data:`CREDIT`.
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,7 +27,7 @@ from companion.errors import DataError
 from companion.metrics import compute
 from companion.params import Params
 from companion.sim.episode import run_episode
-from companion.sim.recorded import DEFAULT_SMOOTHING, RecordedPerson
+from companion.sim.recorded import DEFAULT_SMOOTHING, RecordedPerson, parse_number
 
 #: Frames per second of the ETH/UCY annotations: time = frame / FRAME_RATE.
 FRAME_RATE = 25.0
@@ -163,18 +162,8 @@ def _parse_line(name: str, line_no: int, line: str) -> tuple[float, int, float, 
     if len(cells) != len(_COLUMNS):
         raise DataError(f"{name}:{line_no}: expected 4 values (frame ped_id x y), "
                         f"got {len(cells)}")
-    values = []
-    for col, cell in zip(_COLUMNS, cells):
-        try:
-            value = float(cell)
-        except ValueError:
-            raise DataError(f"{name}:{line_no}: column '{col}': expected a number, "
-                            f"got {cell!r}") from None
-        if not math.isfinite(value):
-            raise DataError(f"{name}:{line_no}: column '{col}': expected a finite number, "
-                            f"got {cell!r}")
-        values.append(value)
-    frame, ped, x, y = values
+    frame, ped, x, y = (parse_number(f"{name}:{line_no}", col, cell)
+                        for col, cell in zip(_COLUMNS, cells))
     for col, value in (("frame", frame), ("ped_id", ped)):
         if value != int(value) or value < 0:
             raise DataError(f"{name}:{line_no}: column '{col}': expected a whole number >= 0, "

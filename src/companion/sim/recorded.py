@@ -309,16 +309,18 @@ def _parse_row(name: str, line: int, row: list[str]) -> tuple[float, float, floa
     if len(row) != len(CSV_COLUMNS):
         raise DataError(f"{name}:{line}: expected {len(CSV_COLUMNS)} cells (t,x,y), "
                         f"got {len(row)}")
-    values = []
-    for col, cell in zip(CSV_COLUMNS, row):
-        text = cell.strip()
-        try:
-            value = float(text)
-        except ValueError:
-            raise DataError(f"{name}:{line}: column '{col}': expected a number, "
-                            f"got {text!r}") from None
-        if not math.isfinite(value):
-            raise DataError(f"{name}:{line}: column '{col}': expected a finite number, "
-                            f"got {text!r}")
-        values.append(value)
-    return values[0], values[1], values[2]
+    t, x, y = (parse_number(f"{name}:{line}", col, cell)
+               for col, cell in zip(CSV_COLUMNS, row))
+    return t, x, y
+
+
+def parse_number(where: str, col: str, cell: str) -> float:
+    """A finite float from a data-file cell, or a one-line DataError naming ``where`` and ``col``."""
+    text = cell.strip()
+    try:
+        value = float(text)
+    except ValueError:
+        raise DataError(f"{where}: column '{col}': expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise DataError(f"{where}: column '{col}': expected a finite number, got {text!r}")
+    return value

@@ -22,7 +22,6 @@ Example::
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from importlib import resources
@@ -236,6 +235,3 @@ def load_scenario(name_or_path: str, params_override: Mapping[str, Any] | None =
         path = builtin_path(name_or_path)
     return scenario_from_mapping(load_toml(path), str(path), path.parent, params_override)
 
-
-def with_changes(sc: Scenario, **changes: Any) -> Scenario:
-    return dataclasses.replace(sc, **changes)
