@@ -77,7 +77,19 @@ def test_scenarios_lists_builtins(capsys):
     code, out, _ = run(["scenarios"], capsys)
     assert code == 0
     names = {line.split()[0] for line in out.splitlines()}
-    assert {"fig3", "line", "circle", "figure8", "ushape"} <= names
+    assert {"fig3", "line", "circle", "figure8", "ushape", "fig4", "fig7", "corridor"} <= names
+
+
+def test_run_with_obstacles_writes_avoidance_metrics_and_panel(tmp_path, capsys):
+    code, out, _ = run(["run", "fig4", "--obstacles", "lidar", "--duration", "20",
+                        "--out", str(tmp_path), "--plot"], capsys)
+    assert code == 0
+    assert "collisions 0" in out
+    m = json.loads((tmp_path / "metrics.json").read_text())
+    assert m["obstacle_collisions"] == 0 and m["min_obstacle_clearance_m"] >= 0.05
+    assert (tmp_path / "avoidance.png").read_bytes()[:4] == b"\x89PNG"
+    with open(tmp_path / "log.csv") as fh:
+        assert {"u_ob", "rho_ob"} <= set(next(csv.DictReader(fh)))
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -110,6 +122,11 @@ def test_bad_usage_exits_2_with_one_line(argv, message, capsys, tmp_path):
     ('[person]\nkind = "csv"\npath = "missing.csv"\n', "missing.csv: cannot read file"),
     ('[person\nkind = "line"\n', "invalid TOML"),
     ('duration = 3\n', "person: missing table"),
+    ('[person]\nkind = "line"\n[[obstacles]]\nkind = "box"\n', "obstacles[0].kind: expected 'circle' or 'wall'"),
+    ('[person]\nkind = "line"\n[[obstacles]]\nkind = "circle"\nradius = -1\n', "obstacles[0].radius: expected a finite positive"),
+    ('[person]\nkind = "line"\n[[obstacles]]\nkind = "circle"\nradus = 1\n', "obstacles[0].radus: unknown key; did you mean 'radius'"),
+    ('[person]\nkind = "line"\n[[obstacles]]\nkind = "wall"\nstart = [1, 1]\nend = [1, 1]\n', "obstacles[0]: expected a wall of positive length"),
+    ('obstacle_source = "radar"\n[person]\nkind = "line"\n', "obstacle_source: expected 'truth' or 'lidar'"),
 ])
 def test_bad_scenario_file(tmp_path, capsys, text, message):
     f = tmp_path / "bad.toml"

@@ -17,6 +17,7 @@ def make_log(rho_e, alpha_e=None, beta=None, dt=0.05):
     cols["alpha"] = math.pi / 2 + (np.zeros(n) if alpha_e is None else np.asarray(alpha_e))
     cols["beta"] = np.zeros(n) if beta is None else np.asarray(beta, float)
     cols["robot_y"][:] = 1.0
+    cols["rho_ob"][:] = np.nan
     return Log(cols)
 
 
@@ -41,3 +42,15 @@ def test_settling_time():
     assert metrics.settling_time(make_log(e)) == pytest.approx(18 * 0.05)
     assert metrics.settling_time(make_log(np.r_[np.zeros(5), 0.5])) is None
     assert metrics.settling_time(make_log(np.zeros(4))) == 0.0
+
+
+def test_obstacle_metrics():
+    log = make_log(np.zeros(8))
+    assert metrics.compute(log)["min_obstacle_clearance_m"] is None
+    assert metrics.compute(log)["obstacle_collisions"] == 0
+    log.columns["rho_ob"][:] = [0.5, 0.1, -0.02, -0.01, 0.2, 0.0, 0.3, 0.4]
+    m = metrics.compute(log)
+    assert m["min_obstacle_clearance_m"] == pytest.approx(-0.02)
+    assert m["obstacle_collisions"] == 2       # two separate contacts
+    log.columns["rho_ob"][0] = -0.1
+    assert metrics.compute(log)["obstacle_collisions"] == 3

@@ -28,6 +28,7 @@ from companion.params import Params, params_from_mapping
 from companion.config import load_toml
 from companion.sim import convergence
 from companion.sim.episode import LOG_COLUMNS, Log, run_episode
+from companion.sim.sensing import make_perception
 from companion.sim.recorded import load_person_csv
 from companion.sim.scenario import Scenario, builtin_names, load_scenario
 
@@ -88,6 +89,8 @@ def build_scenario(args: argparse.Namespace) -> Scenario:
         changes["duration"] = person.duration
     if args.duration:
         changes["duration"] = _positive(args.duration, "--duration")
+    if args.obstacles:
+        changes["obstacle_source"] = args.obstacles
     return dataclasses.replace(sc, **changes)
 
 
@@ -106,14 +109,17 @@ def summary_lines(m: dict) -> list[str]:
         f"({m['rmsv_omega_radps'] * 1000:.2f} mrad/s)",
         f"  min distance robot centre to person {m['min_person_distance_m']:.3f} m",
         f"  settling time {'never' if settle is None else f'{settle:.2f} s'}",
-    ]
+    ] + ([] if m.get("min_obstacle_clearance_m") is None else [
+        f"  min obstacle clearance {m['min_obstacle_clearance_m']:.3f} m, "
+        f"collisions {m['obstacle_collisions']}"])
 
 
 def cmd_run(args: argparse.Namespace) -> int:
     sc = build_scenario(args)
     controller = make_controller(sc.controller, sc.params)
     log = run_episode(controller, sc.person, sc.params, sc.duration, start=sc.start,
-                      seed=sc.seed)
+                      seed=sc.seed, obstacles=sc.obstacles,
+                      perception=make_perception(sc.obstacle_source, sc.params))
     m = metrics.compute(log)
     m["scenario"] = sc.name
     m["controller"] = sc.controller
@@ -127,9 +133,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     written = ["log.csv", "metrics.json"]
     if args.plot:
         title = f"{sc.name} / {sc.controller}"
-        for name, fig in (("trajectory.png", plots.trajectory(log, title)),
-                          ("errors.png", plots.state_errors(log, title)),
-                          ("inputs.png", plots.inputs(log, sc.params, title))):
+        figures = [("trajectory.png", plots.trajectory(log, title, obstacles=sc.obstacles,
+                                                       avoidance=sc.params.avoidance)),
+                   ("errors.png", plots.state_errors(log, title)),
+                   ("inputs.png", plots.inputs(log, sc.params, title))]
+        if sc.obstacles:
+            figures.append(("avoidance.png", plots.avoidance(log, sc.obstacles, sc.params,
+                                                             title)))
+        for name, fig in figures:
             save_figure(fig, out / name)
             plots.close(fig)
             written.append(name)
@@ -246,9 +257,12 @@ def parser() -> argparse.ArgumentParser:
     run.add_argument("--duration", metavar="S", help="simulated time in s")
     run.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides "
                      "(docs/parameters.md)")
+    run.add_argument("--obstacles", choices=("truth", "lidar"),
+                     help="the controller knows the obstacles exactly (truth) or sees what "
+                          "the simulated LiDAR detects (lidar); default: the scenario's")
     run.add_argument("--out", metavar="DIR", help="output folder (default out/SCENARIO)")
     run.add_argument("--plot", action="store_true", help="also write trajectory.png, "
-                     "errors.png, inputs.png")
+                     "errors.png, inputs.png (and avoidance.png when there are obstacles)")
     run.set_defaults(func=cmd_run)
 
     sc = sub.add_parser("scenarios", help="list the built-in scenarios")

@@ -8,7 +8,9 @@
 * settling time: the first time after which |rho_e| < tol_rho, |alpha_e| < tol_alpha and
   |beta - beta_ref| < tol_beta hold to the end of the run (None if they do not hold at the end).
   ``beta_ref`` is the heading offset that holding the slot needs (0 on straight walks);
-* final absolute errors (last sample, beta against beta_ref).
+* final absolute errors (last sample, beta against beta_ref);
+* obstacle clearance (robot footprint to the nearest obstacle surface) and the number of
+  separate collisions.
 """
 
 from __future__ import annotations
@@ -59,6 +61,17 @@ def settling_time(log: Log, tol: Tolerance = Tolerance()) -> float | None:
     return float(log["t"][first])
 
 
+def obstacle_metrics(log: Log) -> dict:
+    """``min_obstacle_clearance_m`` (footprint to surface; None without obstacles) and
+    ``obstacle_collisions``: the number of separate contacts (entries into clearance <= 0)."""
+    rho_ob = log["rho_ob"]
+    if len(rho_ob) == 0 or np.all(np.isnan(rho_ob)):
+        return {"min_obstacle_clearance_m": None, "obstacle_collisions": 0}
+    contact = rho_ob <= 0.0
+    entries = int(contact[0]) + int(np.count_nonzero(contact[1:] & ~contact[:-1]))
+    return {"min_obstacle_clearance_m": float(np.nanmin(rho_ob)), "obstacle_collisions": entries}
+
+
 def _duration(log: Log) -> float:
     """Simulated time covered by the log: the last sample plus one period."""
     t = log["t"]
@@ -86,6 +99,7 @@ def compute(log: Log, tol: Tolerance = Tolerance()) -> dict:
         "duration_s": _duration(log),
         "steps": len(log),
     }
+    values.update(obstacle_metrics(log))
     finite = all(math.isfinite(v) for v in (values["rmse_rho_m"], values["rmse_alpha_rad"]))
     values["finite"] = bool(finite and np.all(np.isfinite(log["v"]))
                             and np.all(np.isfinite(log["omega"])))

@@ -15,6 +15,8 @@ from companion.config import (all_non_negative, all_positive, all_positive_or_in
                               load_toml, non_negative, param, positive, validate)
 from companion.errors import ConfigError
 from companion.model import SIDES
+from companion.perception import ExtractorParams
+from companion.sim.lidar import LidarParams
 
 
 def _bearing(x: float) -> str | None:
@@ -30,6 +32,8 @@ class RobotParams:
     v_max: float = param(1.5, "m/s", "limit on |v|, the linear velocity", positive)
     omega_max: float = param(0.5 * math.pi, "rad/s", "limit on |omega|, the angular velocity",
                              positive)
+    radius: float = param(0.25, "m", "radius of the robot's footprint, a circle around the "
+                          "wheel axle (for obstacle clearance and collisions)", positive)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,12 +79,40 @@ class LqrParams:
 
 @dataclasses.dataclass(frozen=True)
 class SafetyParams:
-    """Keep-out barrier around the person (ours; :mod:`companion.control.safety`)."""
+    """Keep-out barriers around the person and obstacles (ours; :mod:`companion.control.safety`)."""
 
     person_clearance: float = param(0.6, "m", "distance from robot centre to person that the "
                                     "barrier keeps; 0 switches the barrier off", non_negative)
-    barrier_rate: float = param(2.0, "1/s", "rate of the barrier: the robot may approach at "
-                                "most at barrier_rate * (distance - person_clearance)", positive)
+    obstacle_clearance: float = param(0.1, "m", "clearance from the robot's footprint to an "
+                                      "obstacle surface that the barrier keeps; 0 switches "
+                                      "it off", non_negative)
+    barrier_rate: float = param(2.0, "1/s", "rate of the barriers: the robot may approach at "
+                                "most at barrier_rate * (clearance - its minimum)", positive)
+
+
+@dataclasses.dataclass(frozen=True)
+class AvoidanceParams:
+    """Behavioural-dynamics obstacle avoidance (Sec. 3.3, Eq. 17-20)."""
+
+    eta: float = param(28.0, "rad/s^2", "gain of the avoidance angular acceleration (Table 1); "
+                       "0 switches avoidance off", non_negative)
+    c1: float = param(1.5, "1/rad", "decay of the acceleration with |phi| (Table 1)",
+                      non_negative)
+    c2: float = param(0.9, "1/m", "decay of the acceleration with rho_ob (Table 1)",
+                      non_negative)
+    k_ob: float = param(0.375, "-", "K_ob = r_o / rho_o, obstacle radius over influence range; "
+                        "Table 1 prints 0.6 but both experiments imply 0.375 (NOTES.md 9)",
+                        positive)
+    wall_influence: float = param(0.5, "m", "influence range rho_o of wall segments", positive)
+    decay_time: float = param(0.5, "s", "time constant with which u_ob leaks back to 0 "
+                              "(ours; the paper integrates without leak)", positive)
+    field_of_view: float = param(0.5 * math.pi, "rad", "only obstacles with |phi| below this "
+                                 "count (ahead of the robot)", positive)
+    cone_margin: float = param(0.1, "m", "clearance margin of the collision cone: when the "
+                               "heading would pass closer than this, Eq. 17 is evaluated at the "
+                               "cone's edge (ours; a negative value uses the paper's phi)")
+    tie_band: float = param(0.15, "rad", "inside the collision cone, obstacles with |phi| below "
+                            "this are passed on the side away from the person", non_negative)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,6 +124,9 @@ class Params:
     formation: Formation = param(Formation(), "", "")
     lqr: LqrParams = param(LqrParams(), "", "")
     safety: SafetyParams = param(SafetyParams(), "", "")
+    avoidance: AvoidanceParams = param(AvoidanceParams(), "", "")
+    lidar: LidarParams = param(LidarParams(), "", "")
+    extractor: ExtractorParams = param(ExtractorParams(), "", "")
 
     def replace(self, **changes: Any) -> "Params":
         """A copy with top-level fields replaced, validated."""

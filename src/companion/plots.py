@@ -11,8 +11,12 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
+from matplotlib.patches import Circle as Circle2D  # noqa: E402
+
+from companion.control.avoidance import influence_range  # noqa: E402
 from companion.metrics import errors  # noqa: E402
-from companion.params import Params  # noqa: E402
+from companion.obstacles import Circle, Obstacle  # noqa: E402
+from companion.params import AvoidanceParams, Params  # noqa: E402
 from companion.sim.episode import Log  # noqa: E402
 
 PERSON = "tab:red"
@@ -25,9 +29,28 @@ def _headings(ax, x, y, th, every: int, color: str) -> None:
               scale_units="xy", scale=4.0, width=0.004, alpha=0.8)
 
 
-def trajectory(log: Log, title: str = "", marker_period_s: float = 2.0) -> Figure:
-    """Person and robot paths with heading arrows every ``marker_period_s`` seconds."""
+def draw_obstacles(ax, obstacles: Sequence[Obstacle], avoidance: AvoidanceParams | None) -> None:
+    """Obstacles in grey; their influence ranges dashed (when ``avoidance`` is given)."""
+    for i, ob in enumerate(obstacles):
+        label = "obstacle" if i == 0 else None
+        if isinstance(ob, Circle):
+            ax.add_patch(Circle2D((ob.x, ob.y), ob.radius, color="0.4", label=label))
+            if avoidance is not None:
+                reach = ob.radius + influence_range(ob, avoidance)
+                ax.add_patch(Circle2D((ob.x, ob.y), reach, fill=False, ls="--", color="0.5",
+                                      label="influence range (from the surface)"
+                                      if i == 0 else None))
+        else:
+            ax.plot([ob.x0, ob.x1], [ob.y0, ob.y1], color="0.3", lw=3, label=label)
+
+
+def trajectory(log: Log, title: str = "", marker_period_s: float = 2.0,
+               obstacles: Sequence[Obstacle] = (), avoidance: AvoidanceParams | None = None
+               ) -> Figure:
+    """Person and robot paths with heading arrows every ``marker_period_s`` seconds, and the
+    obstacles with their influence ranges."""
     fig, ax = plt.subplots(figsize=(7, 6), layout="constrained")
+    draw_obstacles(ax, obstacles, avoidance)
     dt = float(log["t"][1] - log["t"][0]) if len(log) > 1 else 1.0
     every = int(round(marker_period_s / dt))
     ax.plot(log["person_x"], log["person_y"], color=PERSON, lw=2, label="person")
@@ -83,6 +106,31 @@ def inputs(log: Log, params: Params, title: str = "") -> Figure:
     axes[0].legend(loc="best", fontsize=8)
     axes[1].set_xlabel("t (s)")
     axes[0].set_title(title or "Control inputs (dashed: limits)")
+    return fig
+
+
+def avoidance(log: Log, obstacles: Sequence[Obstacle], params: Params, title: str = ""
+              ) -> Figure:
+    """Fig. 4(d): the avoidance output u_ob and the clearance rho_ob to the nearest obstacle
+    over time, with the influence range(s) dashed."""
+    t = log["t"]
+    fig, axes = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True, layout="constrained")
+    axes[0].plot(t, log["u_ob"], color=ROBOT)
+    axes[0].set_ylabel("u_ob (rad/s)")
+    axes[1].plot(t, log["rho_ob"], color=ROBOT, label="rho_ob (footprint to nearest surface)")
+    for i, reach in enumerate(sorted({influence_range(ob, params.avoidance) for ob in obstacles})):
+        axes[1].axhline(reach, color="tab:purple", ls="--", lw=1,
+                        label="influence range" if i == 0 else None)
+    axes[1].axhline(0.0, color="k", lw=0.8, label="contact")
+    reaches = [influence_range(ob, params.avoidance) for ob in obstacles]
+    if reaches:
+        axes[1].set_ylim(-0.1, 4.0 * max(reaches))
+    axes[1].set_ylabel("rho_ob (m)")
+    axes[1].set_xlabel("t (s)")
+    axes[1].legend(loc="best", fontsize=8)
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    axes[0].set_title(title or "Obstacle avoidance (Fig. 4(d))")
     return fig
 
 

@@ -7,8 +7,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from dataclasses import dataclass
 from typing import Callable
 
+from companion.control.avoidance import AvoidingController
 from companion.control.base import Command, Controller, Observation, PersonState, Pose, saturate
 from companion.control.lqr import LqrController
 from companion.errors import ConfigError
@@ -16,28 +18,46 @@ from companion.config import hint
 from companion.params import Params
 
 
-def paper_lqr(params: Params) -> LqrController:
-    """The LQR as printed: linearised at the desired state, u_d = u_h, no error clipping and
-    no keep-out barrier."""
+def paper_params(params: Params) -> Params:
+    """The paper's design: LQR linearised at the desired state, u_d = u_h, no error clipping,
+    no keep-out barriers, the paper's phi in Eq. 17 (no collision cone)."""
     lqr = dataclasses.replace(params.lqr, linearize_at="desired", feedforward="person",
                               error_clip=(math.inf, math.inf, math.inf))
-    safety = dataclasses.replace(params.safety, person_clearance=0.0)
-    return LqrController(dataclasses.replace(params, lqr=lqr, safety=safety))
+    safety = dataclasses.replace(params.safety, person_clearance=0.0, obstacle_clearance=0.0)
+    avoidance = dataclasses.replace(params.avoidance, cone_margin=-1.0)
+    return dataclasses.replace(params, lqr=lqr, safety=safety, avoidance=avoidance)
 
 
-CONTROLLERS: dict[str, Callable[[Params], Controller]] = {
-    "lqr": LqrController,
-    "lqr-paper": paper_lqr,
+def paper_lqr(params: Params) -> LqrController:
+    """The LQR as printed (see :func:`paper_params`), without the avoidance layer."""
+    return LqrController(paper_params(params))
+
+
+@dataclass(frozen=True)
+class Entry:
+    """A registered controller: its factory and how it adjusts the parameters."""
+
+    factory: Callable[[Params], Controller]
+    adjust: Callable[[Params], Params] = lambda p: p
+
+
+CONTROLLERS: dict[str, Entry] = {
+    "lqr": Entry(LqrController),
+    "lqr-paper": Entry(LqrController, paper_params),
 }
 
 
 def make_controller(name: str, params: Params) -> Controller:
-    """Construct the registered controller ``name``; unknown names raise ConfigError."""
+    """Construct the registered controller ``name`` inside the avoidance and safety layer
+    (the same module for every controller, as in the paper's Fig. 4); unknown names raise
+    ConfigError."""
     if name not in CONTROLLERS:
         raise ConfigError(f"controller: unknown controller {name!r}{hint(name, CONTROLLERS)} "
                           f"(known: {', '.join(CONTROLLERS)})")
-    return CONTROLLERS[name](params)
+    entry = CONTROLLERS[name]
+    params = entry.adjust(params)
+    return AvoidingController(entry.factory(params), params)
 
 
-__all__ = ["CONTROLLERS", "Command", "Controller", "LqrController", "Observation",
-           "PersonState", "Pose", "make_controller", "paper_lqr", "saturate"]
+__all__ = ["AvoidingController", "CONTROLLERS", "Command", "Controller", "LqrController", "Observation",
+           "PersonState", "Pose", "make_controller", "paper_lqr", "paper_params", "saturate"]

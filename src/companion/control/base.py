@@ -5,6 +5,7 @@ episode, and maps one :class:`Observation` per sample period to one :class:`Comm
 
     controller.reset()
     command = controller.step(observation)
+    controller.applied(final_command)   # what was actually sent, after outer layers
 
 ``step`` must return finite inputs within ``robot.v_max`` and ``robot.omega_max``; the
 contract tests in tests/control/test_contract.py run over every registered controller.
@@ -16,6 +17,7 @@ import math
 from dataclasses import dataclass
 from typing import Protocol
 
+from companion.obstacles import Obstacle
 from companion.params import RobotParams
 
 
@@ -41,19 +43,25 @@ class PersonState:
 
 @dataclass(frozen=True)
 class Observation:
-    """What a controller sees at one sample: time (s), robot pose and person state."""
+    """What a controller sees at one sample: time (s), robot pose, person state and the
+    obstacles known at that time (world frame; ground truth or detected)."""
 
     t: float
     robot: Pose
     person: PersonState
+    obstacles: tuple[Obstacle, ...] = ()
 
 
 @dataclass(frozen=True)
 class Command:
-    """Robot input: linear velocity v (m/s) and angular velocity omega (rad/s)."""
+    """Robot input: linear velocity v (m/s) and angular velocity omega (rad/s).
+
+    ``u_ob`` (rad/s) is the part of omega that obstacle avoidance added, for logs and plots.
+    """
 
     v: float
     omega: float
+    u_ob: float = 0.0
 
 
 class Controller(Protocol):
@@ -64,6 +72,10 @@ class Controller(Protocol):
 
     def step(self, obs: Observation) -> Command:
         """Return the input to apply for the next sample period."""
+
+    def applied(self, cmd: Command) -> None:
+        """Told the command actually sent after the layers around this controller (obstacle
+        avoidance, keep-out barriers); controllers that remember their last input store it."""
 
 
 def saturate(v: float, omega: float, robot: RobotParams) -> tuple[float, float]:

@@ -11,8 +11,8 @@ Per sample period:
    robot towards the real one);
 5. solve the Riccati equation for ``K`` and apply ``u = u_d + u_e(k-1) - K xi`` (Eq. 16), clipped
    to the input limits; the stored ``u_e(k-1)`` is what was actually applied minus ``u_d``, so
-   saturation cannot wind it up;
-6. (ours) limit v by the person keep-out barrier (:mod:`companion.control.safety`).
+   saturation cannot wind it up (the layers around the controller report the final command
+   through :meth:`LqrController.applied`).
 
 docs/model.md explains the choices and their measured effect.
 """
@@ -25,7 +25,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.control.base import Command, Observation, saturate
-from companion.control.safety import person_barrier
 from companion.kinematics import wrap_pi
 from companion.lqr import augment, dlqr
 from companion.model import discretize, jacobians, relative_state, slot_reference
@@ -114,7 +113,13 @@ class LqrController:
         du = -self._gain @ xi
         u = u_d + self._u_e_prev + du
         v, om = saturate(float(u[0]), float(u[1]), p.robot)
-        v = person_barrier(v, r, h, p.safety, p.robot)
         self._u_e_prev = np.array([v, om]) - u_d
         self.last = LqrStep(xi=xi, gain=self._gain, u_d=(v_d, omega_d), beta_d=beta_d)
         return Command(v, om)
+
+    def applied(self, cmd: Command) -> None:
+        """Store ``u_e(k-1)`` from the command actually sent (after the safety and avoidance
+        layers), without the avoidance part ``u_ob`` (Eq. 20 adds it outside the LQR)."""
+        if self.last is not None:
+            self._u_e_prev = np.array([cmd.v - self.last.u_d[0],
+                                       cmd.omega - cmd.u_ob - self.last.u_d[1]])

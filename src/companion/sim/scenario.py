@@ -18,6 +18,21 @@ Example::
 
     [params.formation]       # any Params field (docs/parameters.md)
     bearing = "right"        # or "auto": the side the robot starts on (needs robot.start)
+
+    [[obstacles]]            # any number; kind: circle | wall
+    kind = "circle"
+    x = 5.1
+    y = -1.8
+    radius = 0.15
+    influence = 0.4          # optional avoidance range (default radius / K_ob)
+
+    [[obstacles]]
+    kind = "wall"
+    start = [0.0, 1.0]
+    end = [10.0, 1.0]
+
+``obstacle_source`` (top level) is "truth" (the controller knows the obstacles exactly) or
+"lidar" (it sees what the simulated LiDAR detects).
 """
 
 from __future__ import annotations
@@ -32,6 +47,7 @@ from companion.config import build, convert, hint, load_toml, param, positive, r
 from companion.control.base import Pose
 from companion.errors import ConfigError
 from companion.model import LEFT, RIGHT, relative_state
+from companion.obstacles import Circle, Obstacle, Wall
 from companion.params import Params, params_from_mapping
 from companion.sim.person import Figure8, PersonMotion, Segment, SegmentPath, circle, line, u_shape
 from companion.sim.recorded import load_person_csv
@@ -89,6 +105,53 @@ class CsvSpec:
     path: str = param("", "-", "CSV file with header t,x,y; relative to the scenario file")
 
 
+def _non_negative(x: float) -> str | None:
+    return None if 0.0 <= x < math.inf else "a finite number >= 0"
+
+
+@dataclass(frozen=True)
+class CircleObstacleSpec:
+    x: float = param(0.0, "m", "centre x")
+    y: float = param(0.0, "m", "centre y")
+    radius: float = param(0.15, "m", "radius", positive)
+    influence: float | None = param(None, "m", "avoidance range rho_o (default r / K_ob)",
+                                    positive)
+
+
+@dataclass(frozen=True)
+class WallSpec:
+    start: tuple[float, float] = param((0.0, 0.0), "m", "one end (x, y)")
+    end: tuple[float, float] = param((1.0, 0.0), "m", "other end (x, y)")
+    influence: float | None = param(None, "m", "avoidance range rho_o (default "
+                                    "avoidance.wall_influence)", positive)
+
+
+OBSTACLE_KINDS: dict[str, type] = {"circle": CircleObstacleSpec, "wall": WallSpec}
+
+
+def obstacles_from_list(items: Any, where: str) -> tuple[Obstacle, ...]:
+    """Parse ``[[obstacles]]`` tables (``kind = "circle"`` or ``"wall"``)."""
+    if not isinstance(items, list):
+        raise ConfigError(f"{where}obstacles: expected a list of [[obstacles]] tables")
+    out: list[Obstacle] = []
+    for i, item in enumerate(items):
+        name = f"{where}obstacles[{i}]"
+        if not isinstance(item, Mapping):
+            raise ConfigError(f"{name}: expected a table")
+        kind = item.get("kind")
+        if kind not in OBSTACLE_KINDS:
+            raise ConfigError(f"{name}.kind: expected 'circle' or 'wall', got {kind!r}")
+        spec = build(OBSTACLE_KINDS[kind], {k: v for k, v in item.items() if k != "kind"},
+                     prefix=f"{name}.")
+        if isinstance(spec, CircleObstacleSpec):
+            out.append(Circle(spec.x, spec.y, spec.radius, spec.influence))
+        else:
+            if spec.start == spec.end:
+                raise ConfigError(f"{name}: expected a wall of positive length")
+            out.append(Wall(*spec.start, *spec.end, spec.influence))
+    return tuple(out)
+
+
 PERSON_KINDS: dict[str, type] = {"line": LineSpec, "circle": CircleSpec, "figure8": Figure8Spec,
                                  "ushape": UShapeSpec, "segments": SegmentsSpec, "csv": CsvSpec}
 
@@ -140,9 +203,13 @@ class Scenario:
     start: Pose | None
     params: Params
     source: str
+    obstacles: tuple[Obstacle, ...] = ()
+    obstacle_source: str = "truth"
 
 
-TOP_KEYS = ("name", "description", "duration", "seed", "controller", "person", "robot", "params")
+OBSTACLE_SOURCES = ("truth", "lidar")
+TOP_KEYS = ("name", "description", "duration", "seed", "controller", "obstacle_source",
+            "person", "robot", "obstacles", "params")
 
 
 def _resolve_auto_side(params_map: dict, start: Pose | None, person: PersonMotion,
@@ -209,8 +276,13 @@ def scenario_from_mapping(data: Mapping[str, Any], source: str, base_dir: Path,
         params_map = deep_merge(params_map, params_override)
     params_map = _resolve_auto_side(dict(params_map), start, person, where)
     params = params_from_mapping(params_map, prefix=f"{where}params.")
+    obstacles = obstacles_from_list(data.get("obstacles", []), where)
+    obstacle_source = data.get("obstacle_source", "truth")
+    if obstacle_source not in OBSTACLE_SOURCES:
+        raise ConfigError(f"{where}obstacle_source: expected 'truth' or 'lidar', "
+                          f"got {obstacle_source!r}")
     return Scenario(name, description, float(duration), seed, controller, person, start,
-                    params, source)
+                    params, source, obstacles, obstacle_source)
 
 
 def builtin_names() -> list[str]:

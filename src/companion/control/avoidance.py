@@ -1,0 +1,143 @@
+"""Behavioural-dynamics obstacle avoidance (paper Sec. 3.3, Eq. 17-20), for any controller.
+
+For every obstacle inside its influence range (``rho_ob < rho_o``) the robot gets an angular
+acceleration (Eq. 17, after Fajen and Warren)
+
+    A_ob = -eta * phi * exp(-c1 |phi|) * exp(-c2 rho_ob)
+
+with ``phi`` the obstacle's bearing in the robot frame (wrapped to (-pi, pi]; phi > 0 means on
+the left, which turns the robot right). The accelerations are summed (Eq. 19) and integrated
+into an angular-velocity offset ``u_ob`` that is added to the wrapped controller's omega
+(Eq. 20). Choices where the paper is silent (NOTES.md 8-9, docs/model.md section 8):
+
+* ``rho_ob`` is the clearance: distance from the robot's footprint (a circle of
+  ``robot.radius`` around the wheel axle) to the obstacle surface; ``phi`` is the bearing of
+  the obstacle's nearest surface point from the robot centre;
+* only obstacles ahead count (``|phi| < avoidance.field_of_view``), as for a walking person;
+* ``u_ob`` is a leaky integral: ``du_ob/dt = sum A_ob - u_ob / decay_time``, integrated
+  exactly over each period, so it returns to zero after the robot leaves the range;
+* ``u_ob`` is clipped to the headroom the controller's omega leaves under ``omega_max`` and the
+  integrator stores the clipped value (no wind-up); the wrapped controller's own output is
+  passed on unchanged, so its memory of the applied input stays exact.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+from companion.control.base import Command, Controller, Observation
+from companion.control.safety import safe_speed
+from companion.kinematics import wrap_pi
+from companion.obstacles import Circle, Obstacle, nearest_point, surface_distance
+from companion.params import AvoidanceParams, Params
+
+
+def influence_range(obstacle: Obstacle, avoidance: AvoidanceParams) -> float:
+    """rho_o: the obstacle's own ``influence`` if set, else r / K_ob (circles) or the wall
+    default."""
+    if obstacle.influence is not None:
+        return obstacle.influence
+    if isinstance(obstacle, Circle):
+        return obstacle.radius / avoidance.k_ob
+    return avoidance.wall_influence
+
+
+def clearance(obstacle: Obstacle, x: float, y: float, footprint: float) -> float:
+    """Distance from a footprint circle at (x, y) to the obstacle surface (< 0: overlap)."""
+    return surface_distance(obstacle, x, y) - footprint
+
+
+def angular_acceleration(phi: float, rho_ob: float, avoidance: AvoidanceParams) -> float:
+    """Eq. (17) for one obstacle at bearing ``phi`` (rad) and clearance ``rho_ob`` (m)."""
+    a = avoidance
+    return -a.eta * phi * math.exp(-a.c1 * abs(phi)) * math.exp(-a.c2 * rho_ob)
+
+
+def steering_bearing(phi: float, cone: float, person_side: float, tie_band: float) -> float:
+    """The bearing Eq. (17) is evaluated at.
+
+    ``phi`` is the obstacle's bearing and ``cone`` the half-angle of its collision cone (the
+    headings that come too close). Outside the cone this is ``phi`` (the paper). Inside, the
+    heading is blocked and Eq. (17) would steer weakly (it is zero dead ahead): we evaluate it
+    at the cone's edge, on the obstacle's own side (``sign(phi)``), or, when the obstacle is
+    nearly dead ahead (``|phi| < tie_band``), on the side away from the person
+    (``person_side`` +1: person on the robot's left, pass the obstacle on its right), as a
+    walking pair does not split around an obstacle.
+    """
+    if abs(phi) >= cone:
+        return phi
+    if abs(phi) < tie_band:
+        return cone if person_side >= 0.0 else -cone
+    return math.copysign(cone, phi)
+
+
+def total_acceleration(x: float, y: float, theta: float, obstacles: Sequence[Obstacle],
+                       params: Params, person_side: float = 0.0) -> float:
+    """Sum of Eq. (17) over the obstacles in range and ahead (Eq. 19)."""
+    a = params.avoidance
+    total = 0.0
+    for ob in obstacles:
+        rho_ob = clearance(ob, x, y, params.robot.radius)
+        if rho_ob >= influence_range(ob, a):
+            continue
+        px, py = nearest_point(ob, x, y)
+        phi = wrap_pi(math.atan2(py - y, px - x) - theta)
+        if abs(phi) >= a.field_of_view:
+            continue
+        if a.cone_margin >= 0.0:
+            cone = collision_cone(ob, x, y, params.robot.radius + a.cone_margin)
+            phi = steering_bearing(phi, cone, person_side, a.tie_band)
+        total += angular_acceleration(phi, rho_ob, a)
+    return total
+
+
+def collision_cone(obstacle: Obstacle, x: float, y: float, inflate: float) -> float:
+    """Half-angle (rad) of the headings from (x, y) whose straight path comes within
+    ``inflate`` of the obstacle (pi/2 when already that close)."""
+    px, py = nearest_point(obstacle, x, y)
+    dist = math.hypot(px - x, py - y)
+    if isinstance(obstacle, Circle):
+        dist += obstacle.radius  # distance to the centre
+        reach = obstacle.radius + inflate
+    else:
+        reach = inflate
+    return math.asin(min(1.0, reach / dist)) if dist > 0.0 else 0.5 * math.pi
+
+
+class AvoidingController:
+    """Wraps any :class:`~companion.control.base.Controller` with behavioural-dynamics
+    avoidance of ``obs.obstacles`` (see the module docstring) and the keep-out barriers of
+    :mod:`companion.control.safety`, and reports the final command back to it. The command's
+    ``u_ob`` field is the avoidance part of omega."""
+
+    def __init__(self, inner: Controller, params: Params):
+        self.inner = inner
+        self.params = params
+        a = params.avoidance
+        self._decay = math.exp(-params.dt / a.decay_time)
+        self.reset()
+
+    def reset(self) -> None:
+        self.inner.reset()
+        self.u_ob = 0.0
+
+    def step(self, obs: Observation) -> Command:
+        cmd = self.inner.step(obs)
+        r, h = obs.robot, obs.person
+        # +1 when the person is on the robot's left
+        side = math.copysign(1.0, math.cos(r.theta) * (h.y - r.y) - math.sin(r.theta) * (h.x - r.x))
+        acc = total_acceleration(r.x, r.y, r.theta, obs.obstacles, self.params, side)
+        tau = self.params.avoidance.decay_time
+        u_ob = self.u_ob * self._decay + acc * tau * (1.0 - self._decay)
+        w_max = self.params.robot.omega_max
+        u_ob = min(max(u_ob, -w_max - cmd.omega), w_max - cmd.omega)
+        self.u_ob = u_ob
+        v = safe_speed(cmd.v, r, h, obs.obstacles, self.params)
+        final = Command(v, cmd.omega + u_ob, u_ob)
+        self.inner.applied(final)
+        return final
+
+    def applied(self, cmd: Command) -> None:
+        """Nothing to store: the final command is computed here."""

@@ -1,0 +1,319 @@
+"""Obstacle extraction from a 2D LiDAR scan: clusters of returns -> covering circles.
+
+Pipeline (:func:`extract_obstacles`)
+
+1. **Clustering.** Returns are taken in beam order; a new cluster starts where a beam has no
+   return (``inf`` or NaN) or where consecutive returns are farther apart than
+   ``max(cluster_gap, r * sin(dphi) / sin(breakpoint_angle - dphi))``, ``r`` the larger of
+   their ranges and ``dphi`` their angular step. The second term is the adaptive breakpoint
+   of Borges & Aldon (2004): the spacing of returns on a surface seen ``breakpoint_angle``
+   from grazing, so that a far or slanted wall does not fall apart into single returns. In a
+   full-circle scan the cluster crossing the +-pi seam is joined up. Clusters with fewer than
+   ``min_points`` returns are dropped as noise.
+2. **One circle per cluster if it is one.** An algebraic (Kasa) least-squares circle is fitted
+   to the cluster. It is accepted if its centre lies on the far side of the points from the
+   sensor, the sensor is outside it, its radius is at most ``max_radius``, the RMS radial
+   residual is at most ``fit_tolerance`` and the returns bulge towards the sensor by at least
+   ``2 * fit_tolerance`` from their chord (a convex arc; through a nearly straight, noisy
+   piece the fitted circle would be arbitrary).
+3. **Otherwise split.** A cluster that is no such circle (a wall, a corner, a pillar larger
+   than ``max_radius``, objects merged into one cluster) is cut into consecutive pieces of
+   path length at most ``max_segment`` (measured along the returns smoothed by a 5-point
+   moving average, so that noise does not inflate it); neighbouring pieces share their
+   boundary return. Each piece gets the Kasa circle if acceptable (same test), else the
+   fallback: radius half the piece's chord, centre the piece's mean pushed away from the
+   sensor by that radius along the chord's normal.
+4. **Clamp and cover.** The radius is clamped to ``[min_radius, max_radius]`` and then
+   enlarged to the farthest return of the cluster or piece. Every reported circle therefore
+   contains all its returns; as a disc is convex and neighbouring pieces share a return, the
+   union of the circles of a cluster contains the whole polyline through its returns, which
+   is the seen surface up to the beam spacing. Covering has priority over ``max_radius``.
+5. **The person.** Circles whose centre lies within ``person_radius + person_exclusion`` of
+   the tracked person's position are the person's body and are not reported.
+
+The sensor's only view of an object is its near side, which is why fits are checked for the
+centre's side and a fallback exists; the covering step makes the result safe to avoid
+however good the fit was.
+
+Limitations: returns in clusters below ``min_points`` (a thin pole far away, the grazing end
+of a wall beyond ``breakpoint_angle``) are not reported at all. A straight wall piece is
+represented by a circle that bulges up to about 0.2 x ``max_segment`` (0.12 m) in front of
+the wall. When the person stands within ``cluster_gap`` of a wall or an object their
+returns merge; the pieces of that cluster centred near the person are dropped with the
+person's, so a short stretch of the object next to the person can be missing.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from companion.config import non_negative, param, positive
+from companion.obstacles import Circle
+
+@dataclass(frozen=True, eq=False)
+class Scan:
+    """One LiDAR scan and the pose it was taken from.
+
+    Attributes
+    ----------
+    angles : ndarray, shape (n,)
+        Beam angles in rad, robot frame, increasing, centred on the heading.
+    ranges : ndarray, shape (n,)
+        Range per beam in m; ``inf`` = no return within range, NaN = invalid (fault injection).
+    x, y, theta : float
+        Sensor pose in the world frame (m, m, rad) when the scan was taken.
+    """
+
+    angles: np.ndarray
+    ranges: np.ndarray
+    x: float
+    y: float
+    theta: float
+
+
+
+_COVER_EPS = 1e-9  # m added to covering radii so that round-off never leaves a point outside
+
+
+def _at_least_one(n: int) -> str | None:
+    return None if n >= 1 else "an integer >= 1"
+
+
+def _breakpoint_angle(x: float) -> str | None:
+    return None if 0.0 <= x < 0.5 * math.pi else "an angle in [0, pi/2) rad"
+
+
+@dataclass(frozen=True)
+class ExtractorParams:
+    """Turning a LiDAR scan into circular obstacles (:mod:`companion.perception`)."""
+
+    cluster_gap: float = param(0.15, "m", "consecutive returns farther apart than this (and "
+                               "than the adaptive breakpoint distance) start a new cluster; so "
+                               "does a beam without return", positive)
+    breakpoint_angle: float = param(math.radians(10.0), "rad",
+                                    "adaptive breakpoint (Borges & Aldon 2004): returns on a "
+                                    "surface seen at least this angle away from grazing stay in "
+                                    "one cluster, i.e. the gap threshold grows to r * sin(step) "
+                                    "/ sin(breakpoint_angle - step) at range r; 0 = fixed "
+                                    "cluster_gap only", _breakpoint_angle)
+    min_points: int = param(3, "-", "clusters with fewer returns are dropped as noise",
+                            _at_least_one)
+    max_segment: float = param(0.6, "m", "a cluster that is not one circle (a wall, a corner) "
+                               "and is longer than this is split into pieces of at most this "
+                               "length, each reported as its own circle", positive)
+    person_exclusion: float = param(0.5, "m", "circles whose centre is within person_radius + "
+                                    "this of the tracked person are the person and are not "
+                                    "reported (absorbs tracking error)", non_negative)
+    person_radius: float = param(0.2, "m", "radius of the person's body; should match "
+                                 "lidar.person_radius", positive)
+    piece_influence: float = param(0.5, "m", "avoidance influence range given to circles that "
+                                   "stand for pieces of a wall or a large object (like "
+                                   "avoidance.wall_influence for known walls)", positive)
+    min_radius: float = param(0.05, "m", "smallest reported radius", positive)
+    max_radius: float = param(1.0, "m", "largest fitted radius; a circle is only enlarged "
+                              "beyond it to cover its cluster's returns", positive)
+    fit_tolerance: float = param(0.04, "m", "largest RMS radial residual of an accepted "
+                                 "circle fit; the returns must also bulge towards the sensor by "
+                                 "twice this from their chord (about 2-4 x the range noise)",
+                                 positive)
+
+
+def _clusters(scan: Scan, gap: float, breakpoint_angle: float
+              ) -> tuple[np.ndarray, list[np.ndarray]]:
+    """World points of all beams (NaN where no return) and the index arrays of the clusters."""
+    ranges = np.asarray(scan.ranges, float)
+    angles = np.asarray(scan.angles, float) + scan.theta
+    n = len(ranges)
+    valid = np.isfinite(ranges)
+    with np.errstate(invalid="ignore"):            # inf * 0 -> NaN for beams without return
+        pts = np.column_stack((scan.x + ranges * np.cos(angles),
+                               scan.y + ranges * np.sin(angles)))
+    if n == 0 or not valid.any():
+        return pts, []
+    link = valid[:-1] & valid[1:]                  # link[i]: beam i and i+1 in one cluster
+    threshold = np.full(n - 1, gap)
+    if breakpoint_angle > 0.0 and n >= 2:
+        dphi = np.abs(np.diff(angles))
+        with np.errstate(invalid="ignore"):
+            adaptive = (np.fmax(ranges[:-1], ranges[1:]) * np.sin(dphi)
+                        / np.sin(np.maximum(breakpoint_angle - dphi, 1e-12)))
+        threshold = np.where(link & (dphi < breakpoint_angle), np.fmax(threshold, adaptive),
+                             threshold)
+    with np.errstate(invalid="ignore"):
+        link &= np.hypot(*(pts[1:] - pts[:-1]).T) <= threshold
+    starts = np.flatnonzero(valid & np.concatenate(([True], ~link)))
+    ends = np.flatnonzero(valid & np.concatenate((~link, [True])))
+    clusters = [np.arange(a, b + 1) for a, b in zip(starts, ends)]
+    # full circle: join up the cluster that crosses the seam between the last and first beam
+    if n >= 3 and valid[0] and valid[-1]:
+        step = angles[1] - angles[0]
+        seam = angles[0] + 2.0 * math.pi - angles[-1]
+        if seam <= 1.5 * step and math.hypot(*(pts[0] - pts[-1])) <= gap:
+            if len(clusters) >= 2:
+                clusters[0] = np.concatenate((clusters.pop(), clusters[0]))
+            else:                                  # a closed ring: close the polyline too
+                clusters[0] = np.concatenate((clusters[0], [0]))
+    return pts, clusters
+
+
+def _fit(pts: np.ndarray, groups: list[np.ndarray], origin: np.ndarray, heading: np.ndarray,
+         params: ExtractorParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Fit one circle to each group of points, all groups at once (vectorised).
+
+    Parameters
+    ----------
+    pts : ndarray, shape (n, 2)
+        World points of the beams.
+    groups : list of ndarray of int
+        Indices into ``pts`` of each group (at least one point each).
+    origin, heading : ndarray, shape (2,)
+        Sensor position and unit heading (the bearing of a group lying on the sensor).
+    params : ExtractorParams
+        Radius limits and fit tolerance.
+
+    Returns
+    -------
+    centres : ndarray, shape (g, 2)
+    radii : ndarray, shape (g,)
+        Covering radii: every point of a group lies inside its circle.
+    kasa : ndarray of bool, shape (g,)
+        Whether the group's algebraic (Kasa) fit was acceptable, i.e. the group is one circle;
+        where it is not, the fallback (half the chord, pushed away from the sensor) is used.
+    """
+    counts = np.array([len(g) for g in groups])
+    offsets = np.concatenate(([0], np.cumsum(counts)[:-1]))
+    p = pts[np.concatenate(groups)]
+    k = counts.astype(float)
+    mean = np.add.reduceat(p, offsets, axis=0) / k[:, None]
+    q = p - np.repeat(mean, counts, axis=0)        # centred per group, for conditioning
+    qx, qy = q[:, 0], q[:, 1]
+    z = qx * qx + qy * qy
+
+    def total(v: np.ndarray) -> np.ndarray:
+        return np.add.reduceat(v, offsets)
+
+    # Kasa: minimise sum(|q - c|^2 - s)^2 over c = (a, b), s = r^2 - |c|^2; with centred
+    # points the normal equations give s = mean(z) and a 2x2 system for c.
+    sxx, sxy, syy = total(qx * qx), total(qx * qy), total(qy * qy)
+    vx, vy = total(qx * z), total(qy * z)
+    det = sxx * syy - sxy * sxy
+    ok = (counts >= 3) & (det > 1e-12 * (sxx + syy) ** 2)  # not (nearly) collinear
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a = np.where(ok, 0.5 * (syy * vx - sxy * vy) / det, 0.0)
+        b = np.where(ok, 0.5 * (sxx * vy - sxy * vx) / det, 0.0)
+    r2 = total(z) / k + a * a + b * b
+    ok &= np.isfinite(r2) & (r2 > 0.0)
+    r = np.sqrt(np.where(ok, r2, 1.0))
+    resid = np.hypot(qx - np.repeat(a, counts), qy - np.repeat(b, counts)) - np.repeat(r, counts)
+    rms = np.sqrt(total(resid * resid) / k)
+
+    v = mean - origin                              # bearing of each group from the sensor
+    dist = np.hypot(v[:, 0], v[:, 1])
+    on_top = dist <= 1e-12
+    u = np.where(on_top[:, None], heading, v / np.where(on_top, 1.0, dist)[:, None])
+    # chord of each group and its normal pointing away from the sensor (bearing if degenerate)
+    last = offsets + counts - 1
+    chord = p[last] - p[offsets]
+    length = np.hypot(chord[:, 0], chord[:, 1])
+    degenerate = length <= 1e-9
+    normal = np.column_stack((chord[:, 1], -chord[:, 0])) / np.where(degenerate, 1.0,
+                                                                      length)[:, None]
+    normal *= np.where((normal * u).sum(axis=1) < 0.0, -1.0, 1.0)[:, None]
+    normal = np.where(degenerate[:, None], u, normal)
+    # how far the group bulges from its chord towards the sensor: a convex arc does, a
+    # straight (noisy) piece does not, and a Kasa circle through it would be arbitrary
+    toward = -((p - np.repeat(p[offsets], counts, axis=0))
+               * np.repeat(normal, counts, axis=0)).sum(axis=1)
+    bulge = np.where(degenerate, np.inf, np.maximum.reduceat(toward, offsets))
+
+    centre_k = mean + np.column_stack((a, b))
+    kasa = (ok & (r <= params.max_radius) & (rms <= params.fit_tolerance)
+            & (bulge >= 2.0 * params.fit_tolerance)                    # an arc, not a line
+            & (a * u[:, 0] + b * u[:, 1] > 0.0)                        # far side of the points
+            & (np.hypot(*(centre_k - origin).T) > r))                  # sensor outside it
+
+    # fallback: radius half the chord; centre the mean pushed by the radius along the chord's
+    # normal pointing away from the sensor
+    r_fb = np.clip(0.5 * length, params.min_radius, params.max_radius)
+    centres = np.where(kasa[:, None], centre_k, mean + r_fb[:, None] * normal)
+    radii = np.where(kasa, np.maximum(r, params.min_radius), r_fb)
+
+    # cover: enlarge to the farthest point of the group
+    d = p - np.repeat(centres, counts, axis=0)
+    r_cover = np.sqrt(np.maximum.reduceat((d * d).sum(axis=1), offsets))
+    radii = np.maximum(radii, r_cover * (1.0 + 1e-12) + _COVER_EPS)
+    return centres, radii, kasa
+
+
+def _pieces(p: np.ndarray, max_segment: float) -> list[tuple[int, int]]:
+    """Cut the polyline ``p`` into consecutive pieces of path length <= about max_segment.
+
+    Returns inclusive index ranges ``(first, last)`` of about equal length; neighbouring
+    pieces share their boundary point. The length is measured along the polyline smoothed
+    with a 5-point moving average, so that range noise does not inflate it much. A single
+    step longer than a piece is not cut further (a 2-point piece).
+    """
+    k = len(p)
+    if k >= 5:
+        cs = np.cumsum(np.concatenate((p[:1], p[:1], p[:1], p, p[-1:], p[-1:])), axis=0)
+        p = (cs[5:] - cs[:-5]) * 0.2               # edge-padded moving average, k points
+    cum = np.concatenate(([0.0], np.cumsum(np.hypot(*(p[1:] - p[:-1]).T))))
+    n = max(1, math.ceil(cum[-1] / max_segment))
+    if n == 1:
+        return [(0, k - 1)]
+    bounds = np.searchsorted(cum, np.arange(1, n) * (cum[-1] / n), side="right") - 1
+    cuts = sorted({0, k - 1, *(int(x) for x in bounds)})
+    return list(zip(cuts[:-1], cuts[1:]))
+
+
+def extract_obstacles(scan: Scan, person: tuple[float, float] | None,
+                      params: ExtractorParams) -> list[Circle]:
+    """Circular obstacles (world frame) that cover the returns of ``scan``.
+
+    Parameters
+    ----------
+    scan : Scan
+        A LiDAR scan (:func:`companion.sim.lidar.cast` or hand-made); ``inf`` and NaN ranges
+        count as "no return".
+    person : (float, float) or None
+        Tracked position of the person; circles centred near it are left out. ``None``
+        reports everything.
+    params : ExtractorParams
+        Clustering, fitting and exclusion settings.
+
+    Returns
+    -------
+    list of Circle
+        In beam order of their clusters. Each circle contains every return it was fitted to
+        (see the module docstring for the guarantees). Circles that stand for a piece of a
+        split cluster (a wall, a large object) carry ``influence = piece_influence``: their
+        radius says nothing about the object's size, so r / K_ob would be meaningless.
+    """
+    pts, clusters = _clusters(scan, params.cluster_gap, params.breakpoint_angle)
+    origin = np.array((scan.x, scan.y), float)
+    heading = np.array((math.cos(scan.theta), math.sin(scan.theta)))
+    clusters = [c for c in clusters if len(c) >= params.min_points]
+    if not clusters:
+        return []
+    centres, radii, whole = _fit(pts, clusters, origin, heading, params)
+    out = [(i, c, r, None) for i, (c, r) in enumerate(zip(centres.tolist(), radii.tolist()))
+           if whole[i]]
+    pieces, owner = [], []                         # clusters that are not one circle: split
+    for i in np.flatnonzero(~whole):
+        idx = clusters[i]
+        for a, b in _pieces(pts[idx], params.max_segment):
+            pieces.append(idx[a:b + 1])
+            owner.append(i)
+    if pieces:
+        centres, radii, _ = _fit(pts, pieces, origin, heading, params)
+        out += [(i, c, r, params.piece_influence)
+                for i, c, r in zip(owner, centres.tolist(), radii.tolist())]
+    out.sort(key=lambda item: item[0])             # stable: pieces stay in beam order
+    circles = [Circle(c[0], c[1], r, influence) for _, c, r, influence in out]
+    if person is not None:
+        keep_out = params.person_radius + params.person_exclusion
+        circles = [c for c in circles if math.hypot(c.x - person[0], c.y - person[1]) > keep_out]
+    return circles

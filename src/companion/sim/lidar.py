@@ -1,0 +1,225 @@
+"""A simulated planar (2D) LiDAR: exact, vectorised ray casting against the world's obstacles.
+
+The sensor sits at the robot's pose (the wheel-axle centre, see
+:class:`~companion.control.base.Pose`) and casts one ray per beam. Each ray is intersected in
+closed form with every circle, every wall segment and the person's body (a circle of radius
+:attr:`LidarParams.person_radius` around the person's position); the nearest hit is the
+beam's range. Walls have zero thickness (their centre-line, as in :mod:`companion.obstacles`).
+
+Conventions
+
+* Beam angles are in the robot frame (0 = straight ahead, counter-clockwise positive),
+  increasing and centred on the heading. A limited field of view is covered by
+  ``2 * floor(fov / 2 / resolution) + 1`` beams ``k * resolution`` (so there is always a
+  beam at 0). A full circle (``fov == 2*pi``) is covered by an even number ``n`` of beams
+  ``-pi + k * 2*pi / n`` (the step is the resolution rounded so that it divides the circle;
+  there is a beam at -pi and at 0 but none at +pi, so no direction is sampled twice).
+* ``ranges`` is ``inf`` where nothing is hit within ``range_max``. NaN never comes out of
+  :func:`cast`; it is reserved for invalid returns injected by fault tests, and consumers
+  (:mod:`companion.perception`) treat it as "no return".
+* A ray that starts inside a circle (the robot overlaps a pillar or the person) returns
+  range 0: the obstacle is touching the sensor. A ray starting on a wall segment likewise
+  returns 0.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Sequence
+
+import numpy as np
+
+from companion.config import non_negative, param, positive
+from companion.obstacles import Circle, Wall
+from companion.perception import Scan
+
+if TYPE_CHECKING:  # run-time import would cycle: params -> lidar -> control.base -> params
+    from companion.control.base import Pose
+
+TWO_PI = 2.0 * math.pi
+_FULL_CIRCLE_TOL = 1e-9
+_MIN_RESOLUTION = 1e-4  # rad; 2*pi / 1e-4 ~ 63k beams, a sane upper bound on the beam count
+
+
+def _fov(x: float) -> str | None:
+    return None if 0.0 < x <= TWO_PI + _FULL_CIRCLE_TOL else "an angle in (0, 2*pi] rad"
+
+
+def _resolution(x: float) -> str | None:
+    return (None if _MIN_RESOLUTION <= x <= math.pi
+            else f"an angle in [{_MIN_RESOLUTION:g}, pi] rad")
+
+
+@dataclass(frozen=True)
+class LidarParams:
+    """A simulated 2D LiDAR mounted at the robot's pose."""
+
+    fov: float = param(TWO_PI, "rad", "field of view, centred on the robot's heading, in "
+                       "(0, 2*pi]; 2*pi is a full 360 degree scan", _fov)
+    range_max: float = param(10.0, "m", "maximum range; beams hitting nothing closer return "
+                             "inf", positive)
+    resolution: float = param(math.radians(0.5), "rad",
+                              "angular step between beams (0.5 deg: 720 beams per revolution, "
+                              "a typical indoor LiDAR, and fast to simulate); for a full circle "
+                              "it is rounded so that it divides 2*pi", _resolution)
+    rate: float = param(10.0, "Hz", "scans per second; the simulator scans every "
+                        "round(1 / (rate * dt)) control steps and holds the result in between",
+                        positive)
+    noise_std: float = param(0.01, "m", "standard deviation of the Gaussian noise added to "
+                             "every finite range (clipped at 0); 0 = exact", non_negative)
+    person_radius: float = param(0.2, "m", "radius of the circle that stands for the person's "
+                                 "body in the scan", positive)
+
+
+@functools.lru_cache(maxsize=16)
+def _beams(fov: float, resolution: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Beam angles (robot frame) and their cosines and sines, read-only and cached."""
+    if fov >= TWO_PI - _FULL_CIRCLE_TOL:
+        n = max(2, 2 * round(math.pi / resolution))
+        angles = -math.pi + np.arange(n) * (TWO_PI / n)
+    else:
+        m = int(math.floor(0.5 * fov / resolution + 1e-9))
+        angles = np.arange(-m, m + 1) * resolution
+    out = (angles, np.cos(angles), np.sin(angles))
+    for a in out:
+        a.flags.writeable = False
+    return out
+
+
+def beam_angles(params: LidarParams) -> np.ndarray:
+    """The beam angles of a scan with ``params`` (rad, robot frame; a new array)."""
+    return _beams(params.fov, params.resolution)[0].copy()
+
+
+def _ray_circles(ox: float, oy: float, dirs: np.ndarray,
+                 cx: np.ndarray, cy: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Nearest hit distance of each ray with the circles (inf if none), shape (n,).
+
+    ``dirs`` (n, 2) holds the rays' world-frame unit directions, all starting at (ox, oy).
+    """
+    fx, fy = ox - cx, oy - cy                       # (m,) circle centre -> ray origin
+    c = fx * fx + fy * fy - r * r                   # (m,) > 0 iff the origin is outside
+    if (c <= 0.0).any():                            # origin inside (or on) a circle:
+        return np.zeros(len(dirs))                  # every ray hits it at once
+    b = dirs @ np.stack((fx, fy))                   # (n, m) half the linear coefficient
+    disc = b * b
+    disc -= c                                       # roots t = -b +- sqrt(disc)
+    hit = disc >= 0.0
+    hit &= b < 0.0                                  # ahead of the origin, not behind
+    np.sqrt(disc, out=disc, where=hit)
+    disc -= b
+    # near root in the cancellation-free form t = c / (-b + sqrt(disc))  (t1 * t2 = c)
+    t = np.divide(np.broadcast_to(c, b.shape), disc, out=np.full(b.shape, np.inf), where=hit)
+    return t.min(axis=1)
+
+
+def _ray_segments(ox: float, oy: float, dirs: np.ndarray,
+                  x0: np.ndarray, y0: np.ndarray, ex: np.ndarray, ey: np.ndarray) -> np.ndarray:
+    """Nearest hit distance of each ray with the segments (inf if none), shape (n,).
+
+    Solves ``o + t d = p0 + s e`` by cross products: ``t = (w x e) / (d x e)``,
+    ``s = (w x d) / (d x e)`` with ``w = p0 - o``; a hit needs ``t >= 0`` and ``0 <= s <= 1``.
+    """
+    wx, wy = x0 - ox, y0 - oy                       # (k,) ray origin -> segment start
+    denom = dirs @ np.stack((ey, -ex))              # (n, k) d x e
+    w_x_d = dirs @ np.stack((-wy, wx))              # (n, k) w x d = distance of p0 to ray line
+    w_x_e = wx * ey - wy * ex                       # (k,)
+    length = np.hypot(ex, ey)
+    parallel = np.abs(denom) <= 1e-12 * np.maximum(length, 1e-300)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = w_x_e / denom
+        s = w_x_d / denom
+    hit = ~parallel
+    hit &= t >= 0.0
+    hit &= s >= 0.0
+    hit &= s <= 1.0
+    t[~hit] = np.inf
+    # a ray running along its own segment's line: the nearest end ahead, or 0 if on it
+    collinear = parallel & (np.abs(w_x_d) <= 1e-9)
+    if collinear.any():
+        t0 = dirs @ np.stack((wx, wy))
+        t1 = dirs @ np.stack((wx + ex, wy + ey))
+        tc = np.where(t0 * t1 <= 0.0, 0.0,
+                      np.where(np.minimum(t0, t1) > 0.0, np.minimum(t0, t1), np.inf))
+        t = np.where(collinear, tc, t)
+    return t.min(axis=1)
+
+
+def _segment_distance(px: float, py: float, w: np.ndarray) -> np.ndarray:
+    """Distance from (px, py) to each segment ``(x0, y0, ex, ey)`` of ``w`` (k, 4)."""
+    x0, y0, ex, ey = w.T
+    len2 = ex * ex + ey * ey
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = np.where(len2 > 0.0, ((px - x0) * ex + (py - y0) * ey) / len2, 0.0)
+    s = np.clip(s, 0.0, 1.0)
+    return np.hypot(px - x0 - s * ex, py - y0 - s * ey)
+
+
+def cast(pose: "Pose", circles: Sequence[Circle], walls: Sequence[Wall],
+         person: tuple[float, float] | None, params: LidarParams,
+         rng: np.random.Generator | None = None) -> Scan:
+    """Cast one scan from ``pose`` against the circles, walls and the person.
+
+    Parameters
+    ----------
+    pose : Pose
+        Sensor pose (anything with ``x``, ``y``, ``theta``); rays start at (x, y).
+    circles, walls : sequence of Circle, sequence of Wall
+        Static obstacles in world coordinates.
+    person : (float, float) or None
+        The person's position; seen as a circle of radius ``params.person_radius``.
+    params : LidarParams
+        Sensor geometry and noise.
+    rng : numpy.random.Generator or None
+        Source of the range noise; ``None`` (or ``noise_std == 0``) gives exact ranges.
+
+    Returns
+    -------
+    Scan
+        Nearest hit per beam (``inf`` beyond ``range_max``, 0 if the ray starts inside a
+        circle), with Gaussian noise N(0, noise_std) added to finite ranges, clipped at 0.
+    """
+    angles, ca, sa = _beams(params.fov, params.resolution)
+    ox, oy, th = float(pose.x), float(pose.y), float(pose.theta)
+    ct, st = math.cos(th), math.sin(th)
+    dirs = np.column_stack((ca * ct - sa * st, sa * ct + ca * st))  # world-frame unit vectors
+    ranges = np.full(angles.shape, np.inf)
+
+    cx = [c.x for c in circles]
+    cy = [c.y for c in circles]
+    cr = [c.radius for c in circles]
+    if person is not None:
+        cx.append(person[0])
+        cy.append(person[1])
+        cr.append(params.person_radius)
+    if cx:
+        cx_, cy_, cr_ = (np.asarray(v, float) for v in (cx, cy, cr))
+        near = np.hypot(cx_ - ox, cy_ - oy) - cr_ <= params.range_max   # cull out-of-range
+        if near.any():
+            ranges = np.minimum(ranges, _ray_circles(ox, oy, dirs, cx_[near], cy_[near],
+                                                     cr_[near]))
+    if walls:
+        w = np.array([(s.x0, s.y0, s.x1 - s.x0, s.y1 - s.y0) for s in walls], float)
+        near = _segment_distance(ox, oy, w) <= params.range_max
+        if near.any():
+            w = w[near]
+            ranges = np.minimum(ranges, _ray_segments(ox, oy, dirs, w[:, 0], w[:, 1],
+                                                      w[:, 2], w[:, 3]))
+
+    ranges[ranges > params.range_max] = np.inf
+    if rng is not None and params.noise_std > 0.0:
+        hit = np.isfinite(ranges)
+        ranges[hit] = np.maximum(ranges[hit] + rng.normal(0.0, params.noise_std, int(hit.sum())),
+                                 0.0)
+    return Scan(angles=angles.copy(), ranges=ranges, x=ox, y=oy, theta=th)
+
+
+def scan_points(scan: Scan) -> np.ndarray:
+    """World coordinates of the scan's finite returns, shape (k, 2), in beam order."""
+    ranges = np.asarray(scan.ranges, float)
+    ok = np.isfinite(ranges)
+    r = ranges[ok]
+    a = np.asarray(scan.angles, float)[ok] + scan.theta
+    return np.column_stack((scan.x + r * np.cos(a), scan.y + r * np.sin(a)))

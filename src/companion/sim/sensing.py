@@ -1,0 +1,77 @@
+"""How the controller learns about obstacles in simulation: ground truth or a simulated LiDAR.
+
+A perception model is asked once per control step for the obstacles the controller knows
+about (world frame). ``GroundTruth`` passes the world's obstacles through; ``LidarPerception``
+casts a scan at the LiDAR's rate, extracts circles from it (the tracked person excluded) and
+holds them until the next scan.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, Sequence
+
+import numpy as np
+
+from companion.control.base import Pose
+from companion.obstacles import Circle, Obstacle, Wall
+from companion.perception import Scan, extract_obstacles
+from companion.sim.lidar import cast
+from companion.params import Params
+
+
+class Perception(Protocol):
+    def reset(self) -> None:
+        """Forget everything before a new episode."""
+
+    def obstacles(self, step: int, robot: Pose, world: Sequence[Obstacle],
+                  person_true: tuple[float, float], person_seen: tuple[float, float],
+                  rng: np.random.Generator) -> tuple[Obstacle, ...]:
+        """Obstacles known at control step ``step``."""
+
+
+class GroundTruth:
+    """The controller knows the world's obstacles exactly."""
+
+    def reset(self) -> None:
+        pass
+
+    def obstacles(self, step: int, robot: Pose, world: Sequence[Obstacle],
+                  person_true: tuple[float, float], person_seen: tuple[float, float],
+                  rng: np.random.Generator) -> tuple[Obstacle, ...]:
+        return tuple(world)
+
+
+class LidarPerception:
+    """The controller sees what a simulated LiDAR detects: a scan every
+    ``round(1 / (lidar.rate * dt))`` steps, cast against the true obstacles and the person's
+    body, turned into circles by :func:`companion.perception.extract_obstacles` (the tracked
+    person, at its observed position, is excluded) and held until the next scan."""
+
+    def __init__(self, params: Params):
+        self.params = params
+        self.every = max(1, round(1.0 / (params.lidar.rate * params.dt)))
+        self.reset()
+
+    def reset(self) -> None:
+        self.held: tuple[Obstacle, ...] = ()
+        self.last_scan: Scan | None = None
+
+    def obstacles(self, step: int, robot: Pose, world: Sequence[Obstacle],
+                  person_true: tuple[float, float], person_seen: tuple[float, float],
+                  rng: np.random.Generator) -> tuple[Obstacle, ...]:
+        if step % self.every == 0:
+            circles = [ob for ob in world if isinstance(ob, Circle)]
+            walls = [ob for ob in world if isinstance(ob, Wall)]
+            scan = cast(robot, circles, walls, person_true, self.params.lidar, rng)
+            self.last_scan = scan
+            self.held = tuple(extract_obstacles(scan, person_seen, self.params.extractor))
+        return self.held
+
+
+def make_perception(source: str, params: Params) -> Perception:
+    """``"truth"`` or ``"lidar"`` (see the module docstring)."""
+    if source == "truth":
+        return GroundTruth()
+    if source == "lidar":
+        return LidarPerception(params)
+    raise ValueError(f"make_perception: source must be 'truth' or 'lidar', got {source!r}")

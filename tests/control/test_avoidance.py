@@ -1,0 +1,156 @@
+"""Behavioural-dynamics avoidance (Eq. 17-20) and the keep-out barriers."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from companion.control import make_controller
+from companion.control.avoidance import (AvoidingController, angular_acceleration,
+                                         collision_cone, influence_range, steering_bearing,
+                                         total_acceleration)
+from companion.control.base import Command, Observation, PersonState, Pose
+from companion.control.safety import safe_speed
+from companion.kinematics import unicycle_step
+from companion.obstacles import Circle, Wall
+from companion.params import AvoidanceParams, Params
+
+A = AvoidanceParams()
+P = Params()
+
+
+def test_obstacle_on_the_left_turns_right():
+    assert angular_acceleration(0.3, 0.2, A) < 0.0
+    assert angular_acceleration(-0.3, 0.2, A) > 0.0
+    assert angular_acceleration(0.0, 0.2, A) == 0.0
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.floats(0.01, 1.5), st.floats(0.0, 2.0), st.floats(0.01, 2.0))
+def test_magnitude_falls_with_distance(phi, rho, extra):
+    assert abs(angular_acceleration(phi, rho + extra, A)) < abs(angular_acceleration(phi, rho, A))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.floats(1.0 / 1.5, 3.0), st.floats(0.01, 1.0), st.floats(0.0, 2.0))
+def test_magnitude_falls_with_bearing_beyond_the_peak(phi, extra, rho):
+    """|phi| exp(-c1 |phi|) peaks at 1/c1 and falls beyond it (Eq. 17)."""
+    assert abs(angular_acceleration(phi + extra, rho, A)) < abs(angular_acceleration(phi, rho, A))
+
+
+def test_closed_form_value():
+    phi, rho = 0.4, 0.3
+    expected = -28.0 * 0.4 * math.exp(-1.5 * 0.4) * math.exp(-0.9 * 0.3)
+    assert angular_acceleration(phi, rho, A) == pytest.approx(expected)
+
+
+def test_influence_range():
+    assert influence_range(Circle(0, 0, 0.15), A) == pytest.approx(0.4)      # r / K_ob
+    assert influence_range(Circle(0, 0, 0.4875), A) == pytest.approx(1.3)
+    assert influence_range(Circle(0, 0, 0.15, influence=0.7), A) == 0.7
+    assert influence_range(Wall(0, 0, 1, 0), A) == A.wall_influence
+
+
+def test_no_effect_outside_range_or_behind():
+    # robot at origin heading +x, footprint 0.25; obstacle r = 0.15 -> range 0.4 m
+    far = Circle(0.25 + 0.15 + 0.41, 0.1, 0.15)
+    assert total_acceleration(0.0, 0.0, 0.0, [far], P) == 0.0
+    near = Circle(0.25 + 0.15 + 0.3, 0.1, 0.15)
+    assert total_acceleration(0.0, 0.0, 0.0, [near], P) < 0.0
+    behind = Circle(-0.6, 0.1, 0.15)
+    assert total_acceleration(0.0, 0.0, 0.0, [behind], P) == 0.0
+
+
+def test_contributions_add_up():
+    a, b = Circle(0.7, 0.3, 0.15), Circle(0.7, -0.5, 0.15)
+    total = total_acceleration(0.0, 0.0, 0.0, [a, b], P)
+    assert total == pytest.approx(total_acceleration(0.0, 0.0, 0.0, [a], P)
+                                  + total_acceleration(0.0, 0.0, 0.0, [b], P))
+
+
+def test_collision_cone_and_steering_bearing():
+    ob = Circle(2.0, 0.0, 0.15)
+    cone = collision_cone(ob, 0.0, 0.0, 0.35)
+    assert cone == pytest.approx(math.asin(0.5 / 2.0))
+    assert steering_bearing(0.5, cone, 1.0, 0.15) == 0.5        # outside: the paper's phi
+    assert steering_bearing(0.01, cone, 1.0, 0.15) == cone      # person left: pass on the right
+    assert steering_bearing(-0.01, cone, -1.0, 0.15) == -cone
+    assert steering_bearing(-0.2, cone, 1.0, 0.15) == -cone     # clearly right: its own side
+
+
+def _obs(robot, obstacles, person=PersonState(0.0, 5.0, 0.0, 0.0, 0.0)):
+    return Observation(0.0, robot, person, tuple(obstacles))
+
+
+class Straight:
+    """A stand-in controller: always drives straight at 1 m/s; records what was applied."""
+
+    def __init__(self):
+        self.log = []
+
+    def reset(self):
+        self.log.clear()
+
+    def step(self, obs):
+        return Command(1.0, 0.0)
+
+    def applied(self, cmd):
+        self.log.append(cmd)
+
+
+def test_u_ob_leaks_back_to_zero_and_respects_limits():
+    inner = Straight()
+    ctl = AvoidingController(inner, P)
+    ob = Circle(0.7, 0.05, 0.15)
+    u = [ctl.step(_obs(Pose(0.0, 0.0, 0.0), [ob])).u_ob for _ in range(10)]
+    assert u[-1] < 0.0 and abs(u[-1]) <= P.robot.omega_max
+    out = [ctl.step(_obs(Pose(0.0, 0.0, 0.0), [])) for _ in range(60)]
+    assert abs(out[-1].u_ob) < 1e-2 * abs(u[-1])                 # decays (tau = 0.5 s)
+    assert all(abs(c.omega) <= P.robot.omega_max for c in out)
+    assert inner.log[-1] == out[-1]                               # final command reported
+
+
+@pytest.mark.parametrize("obstacle", [Circle(3.0, 0.0, 0.3), Wall(3.0, -2.0, 3.0, 2.0)])
+def test_barrier_stops_head_on_approach(obstacle):
+    """Driving straight at an obstacle, the barrier alone keeps the clearance."""
+    pose = Pose(0.0, 0.0, 0.0)
+    person = PersonState(0.0, 5.0, 0.0, 0.0, 0.0)
+    for _ in range(400):
+        v = safe_speed(1.5, pose, person, [obstacle], P)
+        pose = Pose(*unicycle_step(pose.x, pose.y, pose.theta, v, 0.0, P.dt))
+    if isinstance(obstacle, Circle):
+        clearance = math.hypot(pose.x - obstacle.x, pose.y - obstacle.y) - obstacle.radius
+    else:
+        clearance = obstacle.x0 - pose.x
+    clearance -= P.robot.radius
+    assert clearance == pytest.approx(P.safety.obstacle_clearance, abs=0.01)
+
+
+def test_barrier_keeps_person_clearance_and_backs_off():
+    person = PersonState(2.0, 0.0, math.pi, 0.5, 0.0)   # walks towards the robot
+    pose = Pose(0.0, 0.0, 0.0)
+    closest = math.inf
+    for k in range(200):
+        v = safe_speed(1.0, pose, person, [], P)
+        pose = Pose(*unicycle_step(pose.x, pose.y, pose.theta, v, 0.0, P.dt))
+        person = PersonState(person.x - 0.5 * P.dt, 0.0, math.pi, 0.5, 0.0)
+        closest = min(closest, math.hypot(pose.x - person.x, pose.y - person.y))
+    assert closest >= P.safety.person_clearance - 0.02
+
+
+def test_barriers_off():
+    s = dataclasses.replace(P.safety, person_clearance=0.0, obstacle_clearance=0.0)
+    p = dataclasses.replace(P, safety=s)
+    assert safe_speed(1.2, Pose(0, 0, 0), PersonState(0.3, 0, 0, 0, 0), [Circle(0.5, 0, 0.2)],
+                      p) == 1.2
+
+
+@pytest.mark.parametrize("name", ["lqr", "lqr-paper"])
+def test_avoidance_off_without_obstacles_changes_nothing(name):
+    from companion.sim.episode import run_episode
+    from companion.sim.person import Figure8
+    log = run_episode(make_controller(name, P), Figure8(60.0), P, 10.0)
+    assert np.all(log["u_ob"] == 0.0)
+    assert np.all(np.isnan(log["rho_ob"]))
