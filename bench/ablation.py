@@ -15,7 +15,7 @@ import math
 from threadpoolctl import threadpool_limits
 
 from companion import metrics
-from companion.control import LqrController
+from companion.control import make_controller
 from companion.params import Params
 from companion.sim import convergence
 from companion.sim.person import line
@@ -50,7 +50,7 @@ def fig3(lqr: dict) -> tuple[int, float, float]:
         bearing = math.pi / 2 if case.side == "left" else 1.5 * math.pi
         p = with_lqr(Params(), **lqr)
         p = dataclasses.replace(p, formation=dataclasses.replace(p.formation, bearing=bearing))
-        log = run_episode(LqrController(p), line(convergence.PERSON_START,
+        log = run_episode(make_controller("lqr", p), line(convergence.PERSON_START,
                                                              case.speed), p, 30.0,
                           start=case.start)
         m = metrics.compute(log)
@@ -65,7 +65,7 @@ def fig3(lqr: dict) -> tuple[int, float, float]:
 def scenario(name: str, lqr: dict) -> dict:
     sc = load_scenario(name)
     p = with_lqr(sc.params, **lqr)
-    return metrics.compute(run_episode(LqrController(p), sc.person, p, sc.duration))
+    return metrics.compute(run_episode(make_controller("lqr", p), sc.person, p, sc.duration))
 
 
 def main() -> None:

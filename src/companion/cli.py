@@ -17,7 +17,9 @@ from threadpoolctl import threadpool_limits
 
 import numpy as np
 
-from companion import metrics, plots
+from tqdm import tqdm
+
+from companion import metrics, plots, reproduce, tune
 from companion.control import CONTROLLERS, make_controller
 from companion.control.base import Pose
 from companion.data import pedestrians
@@ -27,10 +29,9 @@ from companion.model import SIDES
 from companion.params import Params, params_from_mapping
 from companion.config import load_toml
 from companion.sim import convergence
-from companion.sim.episode import LOG_COLUMNS, Log, run_episode
-from companion.sim.sensing import make_perception
+from companion.sim.episode import LOG_COLUMNS, Log
 from companion.sim.recorded import load_person_csv
-from companion.sim.scenario import Scenario, builtin_names, load_scenario
+from companion.sim.scenario import Scenario, builtin_names, load_scenario, run_scenario
 
 
 class UsageError(CompanionError):
@@ -114,16 +115,33 @@ def summary_lines(m: dict) -> list[str]:
         f"collisions {m['obstacle_collisions']}"])
 
 
+RUN_OUTPUTS = ("log.csv", "metrics.json", "trajectory.png", "errors.png", "inputs.png",
+               "avoidance.png")
+
+
+def output_dir(path: Path, stale: Sequence[str] = ()) -> Path:
+    """Check (before any work) that ``path`` can be an output folder, and remove the files
+    ``stale`` that an earlier run wrote there, so the folder never mixes two runs."""
+    if path.exists() and not path.is_dir():
+        raise UsageError(f"--out {path}: exists and is not a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        for name in stale:
+            (path / name).unlink(missing_ok=True)
+    except OSError as exc:
+        raise UsageError(f"--out {path}: cannot write there ({exc.strerror})") from None
+    return path
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     sc = build_scenario(args)
-    controller = make_controller(sc.controller, sc.params)
-    log = run_episode(controller, sc.person, sc.params, sc.duration, start=sc.start,
-                      seed=sc.seed, obstacles=sc.obstacles,
-                      perception=make_perception(sc.obstacle_source, sc.params))
+    make_controller(sc.controller, sc.params)  # unknown names: ConfigError with a hint
+    output_dir(Path(args.out or Path("out") / sc.name))
+    log = run_scenario(sc)
     m = metrics.compute(log)
     m["scenario"] = sc.name
     m["controller"] = sc.controller
-    out = Path(args.out or Path("out") / sc.name)
+    out = output_dir(Path(args.out or Path("out") / sc.name), RUN_OUTPUTS)
     write_log(out / "log.csv", log)
     write_json(out / "metrics.json", m)
     print(f"{sc.name}: {sc.description}")
@@ -133,13 +151,15 @@ def cmd_run(args: argparse.Namespace) -> int:
     written = ["log.csv", "metrics.json"]
     if args.plot:
         title = f"{sc.name} / {sc.controller}"
-        figures = [("trajectory.png", plots.trajectory(log, title, obstacles=sc.obstacles,
-                                                       avoidance=sc.params.avoidance)),
-                   ("errors.png", plots.state_errors(log, title)),
-                   ("inputs.png", plots.inputs(log, sc.params, title))]
+        runs = {sc.controller: log}
+        figures = [("trajectory.png", plots.trajectories(runs, title, obstacles=sc.obstacles,
+                                                         avoidance=sc.params.avoidance,
+                             footprint=sc.params.robot.radius)),
+                   ("errors.png", plots.errors_over_time(runs, title)),
+                   ("inputs.png", plots.inputs_over_time(runs, sc.params, title))]
         if sc.obstacles:
-            figures.append(("avoidance.png", plots.avoidance(log, sc.obstacles, sc.params,
-                                                             title)))
+            figures.append(("avoidance.png", plots.avoidance_over_time(runs, sc.obstacles,
+                                                                       sc.params, title)))
         for name, fig in figures:
             save_figure(fig, out / name)
             plots.close(fig)
@@ -162,6 +182,8 @@ def cmd_convergence(args: argparse.Namespace) -> int:
     if args.controller not in CONTROLLERS:
         make_controller(args.controller, params)  # raises with a hint
     speeds = _floats(args.speeds, len(args.speeds.split(",")), "--speeds")
+    if any(v < 0 for v in speeds):
+        raise UsageError(f"--speeds: expected speeds >= 0 m/s, got {args.speeds!r}")
     duration = _positive(args.duration, "--duration")
     rows, runs, failures = [], {}, 0
     print(f"{'speed':>5} {'start':>10} {'heading':>8} {'side':>5} {'settle_s':>9} "
@@ -178,7 +200,7 @@ def cmd_convergence(args: argparse.Namespace) -> int:
         print(f"{case.speed:5.2f} {case.label:>10} {case.start.theta:8.3f} {case.side:>5} "
               f"{'never' if settle is None else f'{settle:.2f}':>9} "
               f"{m['min_person_distance_m']:10.3f}{'' if ok else '  FAIL'}")
-    out = Path(args.out or Path("out") / "convergence")
+    out = output_dir(Path(args.out or Path("out") / "convergence"))
     write_csv(out / "convergence.csv", ("person_speed_mps", "start_x_m", "start_y_m",
                                         "start_theta_rad", "side", "settling_time_s",
                                         "min_person_distance_m", "ok"), rows)
@@ -215,7 +237,7 @@ def cmd_pedestrians(args: argparse.Namespace) -> int:
     rows = pedestrians.evaluate_tracks(tracks, params, args.controller)
     keys = ("scene", "ped_id", "duration_s", "mean_speed_mps", "rmse_rho_m", "rmse_alpha_rad",
             "min_person_distance_m", "finite")
-    out = Path(args.out or Path("out") / "pedestrians")
+    out = output_dir(Path(args.out or Path("out") / "pedestrians"))
     write_csv(out / "pedestrians.csv", keys, ([r[k] for k in keys] for r in rows))
     rho = np.median([r["rmse_rho_m"] for r in rows])
     alpha = np.median([r["rmse_alpha_rad"] for r in rows])
@@ -234,6 +256,37 @@ class OneLineParser(argparse.ArgumentParser):
 
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(2, f"companion: error: {self.prog}: {message} (see --help)\n")
+
+
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    out = output_dir(Path(args.out or Path("out") / "reproduce"))
+    print(f"Reproducing Fig. 3, Table 2, Fig. 4 and Fig. 7 with {', '.join(CONTROLLERS)} "
+          f"into {out} (about 2 minutes)")
+    rows = reproduce.reproduce(out, progress=lambda jobs: tqdm(jobs, unit="run",
+                                                               file=sys.stderr))
+    print(reproduce.fig3_summary(out / "fig3.csv"))
+    print("Table 2 (ours; paper's LQR/PID/VSM/IC rho and alpha at the right):")
+    print(reproduce.table2_text(rows))
+    print("Fig. 4 (figure-8 with the obstacle, every controller):")
+    print(reproduce.fig4_text(out / "fig4.csv"))
+    print(f"wrote table2.csv, table2.md, fig3.csv, fig4.csv and the Fig. 3, 4, 7 PNGs in {out}")
+    return 0
+
+
+def cmd_tune(args: argparse.Namespace) -> int:
+    params = Params()
+    if args.params:
+        params = params_from_mapping(load_toml(args.params), prefix=f"{args.params}: ")
+    if args.budget < 1:
+        raise UsageError(f"--budget: expected a whole number >= 1, got {args.budget}")
+    print(f"tuning {args.controller}: {args.budget} candidates, seed {args.seed}, "
+          f"scenarios {', '.join(c.name for c in tune.tuning_scenarios())}")
+    result = tune.tune(args.controller, params, args.budget, args.seed,
+                       progress=lambda it: tqdm(it, unit="candidate", file=sys.stderr))
+    print(f"J: current gains {result.start_score:.4f}, best {result.best_score:.4f}")
+    for dim, value in zip(result.dims, result.best):
+        print(f"  {dim.name} = {value:.4g}")
+    return 0
 
 
 def parser() -> argparse.ArgumentParser:
@@ -264,6 +317,17 @@ def parser() -> argparse.ArgumentParser:
     run.add_argument("--plot", action="store_true", help="also write trajectory.png, "
                      "errors.png, inputs.png (and avoidance.png when there are obstacles)")
     run.set_defaults(func=cmd_run)
+
+    rp = sub.add_parser("reproduce", help="the paper's Fig. 3, Table 2, Fig. 4 and Fig. 7")
+    rp.add_argument("--out", metavar="DIR", help="output folder (default out/reproduce)")
+    rp.set_defaults(func=cmd_reproduce)
+
+    tn = sub.add_parser("tune", help="tune a controller's gains (docs/baselines.md)")
+    tn.add_argument("controller", choices=sorted(tune.SPACES))
+    tn.add_argument("--budget", type=int, default=64, help="candidates (default 64)")
+    tn.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    tn.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
+    tn.set_defaults(func=cmd_tune)
 
     sc = sub.add_parser("scenarios", help="list the built-in scenarios")
     sc.set_defaults(func=cmd_scenarios)

@@ -165,6 +165,14 @@ def validate(obj: Any, prefix: str = "") -> None:
         _check_field(f, value, name)
 
 
+class Validated:
+    """Mixin for config dataclasses: every field is checked when the object is made, so a
+    config built in Python is as safe as one loaded from TOML."""
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+
 def load_toml(path: str | Path) -> dict[str, Any]:
     """Parse a TOML file; a missing file or a syntax error raises a one-line ConfigError."""
     path = Path(path)

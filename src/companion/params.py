@@ -11,12 +11,16 @@ import math
 from pathlib import Path
 from typing import Any, Mapping
 
-from companion.config import (all_non_negative, all_positive, all_positive_or_inf, build,
-                              load_toml, non_negative, param, positive, validate)
+from companion.config import (Validated, all_non_negative, all_positive, all_positive_or_inf,
+                              build, load_toml, non_negative, param, positive, validate)
 from companion.errors import ConfigError
 from companion.model import SIDES
 from companion.perception import ExtractorParams
 from companion.sim.lidar import LidarParams
+
+
+def _sample_period(x: float) -> str | None:
+    return None if 1e-3 <= x <= 1.0 else "a sample period in [0.001, 1] s"
 
 
 def _bearing(x: float) -> str | None:
@@ -24,7 +28,7 @@ def _bearing(x: float) -> str | None:
 
 
 @dataclasses.dataclass(frozen=True)
-class RobotParams:
+class RobotParams(Validated):
     """Differential-drive robot: geometry and input limits."""
 
     d: float = param(0.25, "m", "offset of the reference point R ahead of the wheel axle (Eq. 2); "
@@ -37,7 +41,7 @@ class RobotParams:
 
 
 @dataclasses.dataclass(frozen=True)
-class Formation:
+class Formation(Validated):
     """Where the robot walks relative to the person."""
 
     distance: float = param(1.0, "m", "desired distance rho_d from the person to R", positive)
@@ -48,7 +52,7 @@ class Formation:
 
 
 @dataclasses.dataclass(frozen=True)
-class LqrParams:
+class LqrParams(Validated):
     """Augmented-state LQR companion controller (Sec. 3.2)."""
 
     q: tuple[float, float, float, float, float] = param(
@@ -78,7 +82,7 @@ class LqrParams:
 
 
 @dataclasses.dataclass(frozen=True)
-class SafetyParams:
+class SafetyParams(Validated):
     """Keep-out barriers around the person and obstacles (ours; :mod:`companion.control.safety`)."""
 
     person_clearance: float = param(0.6, "m", "distance from robot centre to person that the "
@@ -91,7 +95,7 @@ class SafetyParams:
 
 
 @dataclasses.dataclass(frozen=True)
-class AvoidanceParams:
+class AvoidanceParams(Validated):
     """Behavioural-dynamics obstacle avoidance (Sec. 3.3, Eq. 17-20)."""
 
     eta: float = param(28.0, "rad/s^2", "gain of the avoidance angular acceleration (Table 1); "
@@ -116,10 +120,58 @@ class AvoidanceParams:
 
 
 @dataclasses.dataclass(frozen=True)
-class Params:
+class PidParams(Validated):
+    """PID baseline (:mod:`companion.control.pid`, docs/baselines.md). Errors are those of the
+    reference point R against the slot S in the robot frame (e_x ahead, e_y left) and of the
+    heading against the slot-holding heading (e_theta)."""
+
+    kp_x: float = param(3.412, "1/s", "proportional gain of v on e_x", non_negative)
+    ki_x: float = param(0.1497, "1/s^2", "integral gain of v on e_x", non_negative)
+    kd_x: float = param(0.04882, "-", "derivative gain of v on the filtered rate of e_x",
+                        non_negative)
+    kp_y: float = param(7.851, "rad/(s m)", "proportional gain of omega on e_y", non_negative)
+    ki_y: float = param(0.05333, "rad/(s^2 m)", "integral gain of omega on e_y", non_negative)
+    kd_y: float = param(0.0232, "rad/m", "derivative gain of omega on the filtered rate of e_y",
+                        non_negative)
+    kp_theta: float = param(3.991, "1/s", "proportional gain of omega on e_theta", non_negative)
+    derivative_tau: float = param(0.2, "s", "time constant of the first-order filter on the "
+                                  "derivative terms", positive)
+    i_limit_v: float = param(0.5, "m/s", "clamp on the integral term of v (anti-windup)",
+                             non_negative)
+    i_limit_omega: float = param(0.5, "rad/s", "clamp on the integral term of omega "
+                                 "(anti-windup)", non_negative)
+
+
+@dataclasses.dataclass(frozen=True)
+class VsmParams(Validated):
+    """Virtual spring model baseline (:mod:`companion.control.vsm`, docs/baselines.md): a
+    spring-damper between R and the slot S acting on a virtual mass at R."""
+
+    stiffness: float = param(8.326, "N/m", "spring constant k", positive)
+    damping: float = param(1.948, "N s/m", "damper constant c", non_negative)
+    mass: float = param(0.309, "kg", "virtual mass m", positive)
+
+
+@dataclasses.dataclass(frozen=True)
+class ImpedanceParams(Validated):
+    """Impedance control baseline (:mod:`companion.control.impedance`, docs/baselines.md):
+    ``M e_ddot + D e_dot + K e = 0`` on the slot error in the person frame, per axis
+    (longitudinal along the person's heading, lateral to its left)."""
+
+    mass: tuple[float, float] = param((0.1437, 0.9623), "kg", "virtual mass M (longitudinal, lateral)",
+                                      all_positive)
+    damping: tuple[float, float] = param((0.2843, 7.237), "N s/m",
+                                         "damping D (longitudinal, lateral)", all_non_negative)
+    stiffness: tuple[float, float] = param((1.9, 18.99), "N/m",
+                                           "stiffness K (longitudinal, lateral)", all_positive)
+
+
+@dataclasses.dataclass(frozen=True)
+class Params(Validated):
     """Everything that tunes a run; defaults are the paper's Table 1."""
 
-    dt: float = param(0.05, "s", "sample period T of controller and simulator", positive)
+    dt: float = param(0.05, "s", "sample period T of controller and simulator, in [0.001, 1]",
+                      _sample_period)
     robot: RobotParams = param(RobotParams(), "", "")
     formation: Formation = param(Formation(), "", "")
     lqr: LqrParams = param(LqrParams(), "", "")
@@ -127,6 +179,9 @@ class Params:
     avoidance: AvoidanceParams = param(AvoidanceParams(), "", "")
     lidar: LidarParams = param(LidarParams(), "", "")
     extractor: ExtractorParams = param(ExtractorParams(), "", "")
+    pid: PidParams = param(PidParams(), "", "")
+    vsm: VsmParams = param(VsmParams(), "", "")
+    impedance: ImpedanceParams = param(ImpedanceParams(), "", "")
 
     def replace(self, **changes: Any) -> "Params":
         """A copy with top-level fields replaced, validated."""

@@ -50,7 +50,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.config import non_negative, param, positive
+from companion.config import Validated, non_negative, param, positive
+from companion.errors import ConfigError
 from companion.obstacles import Circle
 
 @dataclass(frozen=True, eq=False)
@@ -87,7 +88,7 @@ def _breakpoint_angle(x: float) -> str | None:
 
 
 @dataclass(frozen=True)
-class ExtractorParams:
+class ExtractorParams(Validated):
     """Turning a LiDAR scan into circular obstacles (:mod:`companion.perception`)."""
 
     cluster_gap: float = param(0.15, "m", "consecutive returns farther apart than this (and "
@@ -119,6 +120,12 @@ class ExtractorParams:
                                  "circle fit; the returns must also bulge towards the sensor by "
                                  "twice this from their chord (about 2-4 x the range noise)",
                                  positive)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.min_radius > self.max_radius:
+            raise ConfigError(f"extractor.min_radius: expected at most max_radius "
+                              f"({self.max_radius:g} m), got {self.min_radius:g}")
 
 
 def _clusters(scan: Scan, gap: float, breakpoint_angle: float

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import matplotlib
 
@@ -29,59 +29,78 @@ def _headings(ax, x, y, th, every: int, color: str) -> None:
               scale_units="xy", scale=4.0, width=0.004, alpha=0.8)
 
 
-def draw_obstacles(ax, obstacles: Sequence[Obstacle], avoidance: AvoidanceParams | None) -> None:
-    """Obstacles in grey; their influence ranges dashed (when ``avoidance`` is given)."""
+def draw_obstacles(ax, obstacles: Sequence[Obstacle], avoidance: AvoidanceParams | None,
+                   footprint: float = 0.0) -> None:
+    """Obstacles in grey; dashed, where the robot centre enters their influence range
+    (surface + rho_o + footprint radius), when ``avoidance`` is given."""
     for i, ob in enumerate(obstacles):
         label = "obstacle" if i == 0 else None
         if isinstance(ob, Circle):
             ax.add_patch(Circle2D((ob.x, ob.y), ob.radius, color="0.4", label=label))
             if avoidance is not None:
-                reach = ob.radius + influence_range(ob, avoidance)
+                reach = ob.radius + influence_range(ob, avoidance) + footprint
                 ax.add_patch(Circle2D((ob.x, ob.y), reach, fill=False, ls="--", color="0.5",
-                                      label="influence range (from the surface)"
+                                      label="influence range (robot centre)"
                                       if i == 0 else None))
         else:
             ax.plot([ob.x0, ob.x1], [ob.y0, ob.y1], color="0.3", lw=3, label=label)
 
 
-def trajectory(log: Log, title: str = "", marker_period_s: float = 2.0,
-               obstacles: Sequence[Obstacle] = (), avoidance: AvoidanceParams | None = None
-               ) -> Figure:
-    """Person and robot paths with heading arrows every ``marker_period_s`` seconds, and the
-    obstacles with their influence ranges."""
+Runs = Mapping[str, Log]
+"""Logs of the same scenario by controller name (they share the person)."""
+
+
+def _colors(runs: Runs) -> dict[str, str]:
+    if len(runs) == 1:
+        return {name: ROBOT for name in runs}
+    palette = ["tab:purple", "tab:green", "tab:orange", "tab:pink", "tab:blue", "tab:brown"]
+    return {name: palette[i % len(palette)] for i, name in enumerate(runs)}
+
+
+def trajectories(runs: Runs, title: str = "", marker_period_s: float = 2.0,
+                 obstacles: Sequence[Obstacle] = (), avoidance: AvoidanceParams | None = None,
+                 footprint: float = 0.0) -> Figure:
+    """Person and robot paths (one per run) with heading arrows every ``marker_period_s``
+    seconds, and the obstacles with their influence ranges (Fig. 3(a), Fig. 4(a))."""
     fig, ax = plt.subplots(figsize=(7, 6), layout="constrained")
-    draw_obstacles(ax, obstacles, avoidance)
-    dt = float(log["t"][1] - log["t"][0]) if len(log) > 1 else 1.0
+    draw_obstacles(ax, obstacles, avoidance, footprint)
+    first = next(iter(runs.values()))
+    dt = float(first["t"][1] - first["t"][0]) if len(first) > 1 else 1.0
     every = int(round(marker_period_s / dt))
-    ax.plot(log["person_x"], log["person_y"], color=PERSON, lw=2, label="person")
-    ax.plot(log["robot_x"], log["robot_y"], color=ROBOT, lw=1.5, ls="--", label="robot")
-    _headings(ax, log["person_x"], log["person_y"], log["person_theta"], every, PERSON)
-    _headings(ax, log["robot_x"], log["robot_y"], log["robot_theta"], every, ROBOT)
-    ax.plot(log["person_x"][0], log["person_y"][0], "o", color=PERSON, label="start")
-    ax.plot(log["robot_x"][0], log["robot_y"][0], "o", color=ROBOT)
+    ax.plot(first["person_x"], first["person_y"], color=PERSON, lw=2, label="person")
+    _headings(ax, first["person_x"], first["person_y"], first["person_theta"], every, PERSON)
+    ax.plot(first["person_x"][0], first["person_y"][0], "o", color=PERSON, label="start")
+    for (name, log), color in zip(runs.items(), _colors(runs).values()):
+        ax.plot(log["robot_x"], log["robot_y"], color=color, lw=1.5, ls="--", label=name)
+        _headings(ax, log["robot_x"], log["robot_y"], log["robot_theta"], every, color)
+        ax.plot(log["robot_x"][0], log["robot_y"][0], "o", color=color)
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_title(title or "Trajectories (arrows: heading)")
     ax.grid(alpha=0.3)
-    ax.legend(loc="best")
+    ax.legend(loc="best", fontsize=8)
     return fig
 
 
-def state_errors(log: Log, title: str = "") -> Figure:
-    """rho, alpha and beta errors over time (beta also against the turn's beta_ref)."""
-    e = errors(log)
-    t = log["t"]
+def errors_over_time(runs: Runs, title: str = "") -> Figure:
+    """rho, alpha and beta errors over time (Fig. 4(b)); with one run, beta_ref dotted."""
     fig, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True, layout="constrained")
-    axes[0].plot(t, e["rho"], color=ROBOT)
+    for (name, log), color in zip(runs.items(), _colors(runs).values()):
+        e = errors(log)
+        axes[0].plot(log["t"], e["rho"], color=color, label=name)
+        axes[1].plot(log["t"], e["alpha"], color=color)
+        axes[2].plot(log["t"], e["beta"], color=color)
+    if len(runs) == 1:
+        log = next(iter(runs.values()))
+        axes[2].plot(log["t"], log["beta_ref"], color="k", ls=":", lw=1,
+                     label="beta_ref (heading offset a turn needs)")
+        axes[2].legend(loc="best", fontsize=8)
+    else:
+        axes[0].legend(loc="best", fontsize=8)
     axes[0].set_ylabel("rho - rho_d (m)")
-    axes[1].plot(t, e["alpha"], color=ROBOT)
     axes[1].set_ylabel("alpha - alpha_d (rad)")
-    axes[2].plot(t, e["beta"], color=ROBOT, label="beta")
-    axes[2].plot(t, log["beta_ref"], color="k", ls=":", lw=1,
-                 label="beta_ref (heading offset a turn needs)")
     axes[2].set_ylabel("beta (rad)")
-    axes[2].legend(loc="best", fontsize=8)
     axes[2].set_xlabel("t (s)")
     for ax in axes:
         ax.axhline(0.0, color="grey", lw=0.8)
@@ -90,15 +109,16 @@ def state_errors(log: Log, title: str = "") -> Figure:
     return fig
 
 
-def inputs(log: Log, params: Params, title: str = "") -> Figure:
-    """Robot inputs against the person's velocity, with the input limits dashed."""
-    t = log["t"]
+def inputs_over_time(runs: Runs, params: Params, title: str = "") -> Figure:
+    """Robot inputs against the person's velocity, input limits dashed (Fig. 4(c))."""
     fig, axes = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True, layout="constrained")
+    first = next(iter(runs.values()))
     for ax, key, pkey, lim, unit in ((axes[0], "v", "person_v", params.robot.v_max, "m/s"),
                                     (axes[1], "omega", "person_omega", params.robot.omega_max,
                                      "rad/s")):
-        ax.plot(t, log[pkey], color=PERSON, lw=1.5, label="person")
-        ax.plot(t, log[key], color=ROBOT, lw=1.2, label="robot")
+        ax.plot(first["t"], first[pkey], color=PERSON, lw=1.5, label="person")
+        for (name, log), color in zip(runs.items(), _colors(runs).values()):
+            ax.plot(log["t"], log[key], color=color, lw=1.2, label=name)
         for s in (-1, 1):
             ax.axhline(s * lim, color="k", ls="--", lw=0.8)
         ax.set_ylabel(f"{key} ({unit})")
@@ -109,23 +129,24 @@ def inputs(log: Log, params: Params, title: str = "") -> Figure:
     return fig
 
 
-def avoidance(log: Log, obstacles: Sequence[Obstacle], params: Params, title: str = ""
-              ) -> Figure:
+def avoidance_over_time(runs: Runs, obstacles: Sequence[Obstacle], params: Params,
+                        title: str = "") -> Figure:
     """Fig. 4(d): the avoidance output u_ob and the clearance rho_ob to the nearest obstacle
     over time, with the influence range(s) dashed."""
-    t = log["t"]
     fig, axes = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True, layout="constrained")
-    axes[0].plot(t, log["u_ob"], color=ROBOT)
+    for (name, log), color in zip(runs.items(), _colors(runs).values()):
+        axes[0].plot(log["t"], log["u_ob"], color=color, label=name)
+        axes[1].plot(log["t"], log["rho_ob"], color=color)
     axes[0].set_ylabel("u_ob (rad/s)")
-    axes[1].plot(t, log["rho_ob"], color=ROBOT, label="rho_ob (footprint to nearest surface)")
-    for i, reach in enumerate(sorted({influence_range(ob, params.avoidance) for ob in obstacles})):
+    axes[0].legend(loc="best", fontsize=8)
+    reaches = sorted({influence_range(ob, params.avoidance) for ob in obstacles})
+    for i, reach in enumerate(reaches):
         axes[1].axhline(reach, color="tab:purple", ls="--", lw=1,
                         label="influence range" if i == 0 else None)
     axes[1].axhline(0.0, color="k", lw=0.8, label="contact")
-    reaches = [influence_range(ob, params.avoidance) for ob in obstacles]
     if reaches:
         axes[1].set_ylim(-0.1, 4.0 * max(reaches))
-    axes[1].set_ylabel("rho_ob (m)")
+    axes[1].set_ylabel("rho_ob (m), footprint to nearest surface")
     axes[1].set_xlabel("t (s)")
     axes[1].legend(loc="best", fontsize=8)
     for ax in axes:

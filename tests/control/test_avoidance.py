@@ -154,3 +154,25 @@ def test_avoidance_off_without_obstacles_changes_nothing(name):
     log = run_episode(make_controller(name, P), Figure8(60.0), P, 10.0)
     assert np.all(log["u_ob"] == 0.0)
     assert np.all(np.isnan(log["rho_ob"]))
+
+
+def test_lqr_stores_what_the_layers_sent():
+    """No wind-up on the real path: when the barrier cuts v, the LQR's u_e(k-1) is the
+    command actually sent minus u_d (and minus u_ob)."""
+    ctl = make_controller("lqr", P)
+    ctl.reset()
+    lqr = ctl.inner
+    # robot right behind the person and facing them: the barrier must cut v
+    obs = Observation(0.0, Pose(-0.7, 0.0, 0.0), PersonState(0.0, 0.0, 0.0, 0.0, 0.0),
+                      (Circle(-0.3, 0.9, 0.15),))
+    for _ in range(5):
+        cmd = ctl.step(obs)
+        u_d = np.array(lqr.last.u_d)
+        np.testing.assert_allclose(lqr._u_e_prev,
+                                   np.array([cmd.v, cmd.omega - cmd.u_ob]) - u_d, atol=1e-12)
+        # the barrier allows approaching at most 2/s * (0.7 m - 0.6 m) = 0.2 m/s here
+        assert cmd.v <= 0.2 + 1e-9
+    from companion.control import LqrController
+    alone = LqrController(P)
+    alone.reset()
+    assert alone.step(obs).v > 0.2 + 1e-3      # so the layer did change the command

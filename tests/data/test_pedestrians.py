@@ -9,6 +9,7 @@ $COMPANION_PEDESTRIANS) is not found.
 from __future__ import annotations
 
 import math
+import os
 import statistics
 from pathlib import Path
 
@@ -139,6 +140,8 @@ MAX_MEDIAN_ALPHA = 0.10  # rad, median over tracks of the RMSE of alpha
 @pytest.fixture(scope="module")
 def walking_tracks() -> list[Track]:
     data_dir = default_data_dir()
+    if data_dir is None and os.environ.get("CI"):
+        pytest.fail("pedestrian data not found in CI: expected ../shared/data/pedestrians")
     if data_dir is None:
         pytest.skip("pedestrian data not found: expected ../shared/data/pedestrians next to "
                     f"the repository, or set {ENV_VAR}")

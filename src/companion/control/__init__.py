@@ -12,7 +12,10 @@ from typing import Callable
 
 from companion.control.avoidance import AvoidingController
 from companion.control.base import Command, Controller, Observation, PersonState, Pose, saturate
+from companion.control.impedance import ImpedanceController
 from companion.control.lqr import LqrController
+from companion.control.pid import PidController
+from companion.control.vsm import VsmController
 from companion.errors import ConfigError
 from companion.config import hint
 from companion.params import Params
@@ -33,6 +36,18 @@ def paper_lqr(params: Params) -> LqrController:
     return LqrController(paper_params(params))
 
 
+#: Q and R of our LQR after the same tuning procedure and budget as the baselines
+#: (``companion tune lqr``, docs/baselines.md).
+TUNED_LQR_Q = (109.1, 10.69, 113.6, 1.058, 8.022)
+TUNED_LQR_R = (1.566, 41.36)
+
+
+def tuned_lqr_params(params: Params) -> Params:
+    """Our LQR with Q and R from ``companion tune lqr`` instead of Table 1."""
+    lqr = dataclasses.replace(params.lqr, q=TUNED_LQR_Q, r=TUNED_LQR_R)
+    return dataclasses.replace(params, lqr=lqr)
+
+
 @dataclass(frozen=True)
 class Entry:
     """A registered controller: its factory and how it adjusts the parameters."""
@@ -44,6 +59,10 @@ class Entry:
 CONTROLLERS: dict[str, Entry] = {
     "lqr": Entry(LqrController),
     "lqr-paper": Entry(LqrController, paper_params),
+    "lqr-tuned": Entry(LqrController, tuned_lqr_params),
+    "pid": Entry(PidController),
+    "vsm": Entry(VsmController),
+    "ic": Entry(ImpedanceController),
 }
 
 
@@ -59,5 +78,6 @@ def make_controller(name: str, params: Params) -> Controller:
     return AvoidingController(entry.factory(params), params)
 
 
-__all__ = ["AvoidingController", "CONTROLLERS", "Command", "Controller", "LqrController", "Observation",
-           "PersonState", "Pose", "make_controller", "paper_lqr", "paper_params", "saturate"]
+__all__ = ["AvoidingController", "CONTROLLERS", "Command", "Controller", "ImpedanceController",
+           "LqrController", "Observation", "PersonState", "PidController", "Pose",
+           "VsmController", "make_controller", "paper_lqr", "paper_params", "saturate"]

@@ -15,12 +15,12 @@ from typing import Sequence
 
 import numpy as np
 
-from companion.obstacles import Obstacle
-
 from companion.control.avoidance import clearance
 from companion.control.base import Controller, Observation, PersonState, Pose
 from companion.kinematics import unicycle_step
+from companion.errors import ConfigError
 from companion.model import relative_state, robot_pose_at, slot_reference
+from companion.obstacles import Obstacle
 from companion.params import Params
 from companion.sim.sensing import GroundTruth, Perception
 from companion.sim.person import PersonMotion
@@ -106,6 +106,9 @@ def run_episode(controller: Controller, person: PersonMotion, params: Params,
     dt, d = params.dt, params.robot.d
     f = params.formation
     n = int(round(duration / dt))
+    if n < 1:
+        raise ConfigError(f"duration: expected at least one sample period ({dt:g} s), "
+                          f"got {duration:g} s")
     rng = np.random.default_rng(seed)
     out = np.empty((n, len(LOG_COLUMNS)))
     obstacles = tuple(obstacles)

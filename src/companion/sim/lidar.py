@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
-from companion.config import non_negative, param, positive
+from companion.config import Validated, non_negative, param, positive
 from companion.obstacles import Circle, Wall
 from companion.perception import Scan
 
@@ -53,7 +53,7 @@ def _resolution(x: float) -> str | None:
 
 
 @dataclass(frozen=True)
-class LidarParams:
+class LidarParams(Validated):
     """A simulated 2D LiDAR mounted at the robot's pose."""
 
     fov: float = param(TWO_PI, "rad", "field of view, centred on the robot's heading, in "

@@ -49,6 +49,9 @@ from companion.errors import ConfigError
 from companion.model import LEFT, RIGHT, relative_state
 from companion.obstacles import Circle, Obstacle, Wall
 from companion.params import Params, params_from_mapping
+from companion.control import make_controller
+from companion.sim.episode import Log, run_episode
+from companion.sim.sensing import make_perception
 from companion.sim.person import Figure8, PersonMotion, Segment, SegmentPath, circle, line, u_shape
 from companion.sim.recorded import load_person_csv
 
@@ -299,11 +302,22 @@ def load_scenario(name_or_path: str, params_override: Mapping[str, Any] | None =
                   ) -> Scenario:
     """Load a built-in scenario by name, or a TOML file by path."""
     path = Path(name_or_path)
-    if not path.suffix and not path.exists():
+    if path.suffix != ".toml" and len(path.parts) == 1:  # a bare name: a built-in scenario
         names = builtin_names()
         if name_or_path not in names:
             raise ConfigError(f"{name_or_path}: no built-in scenario of that name"
-                              f"{hint(name_or_path, names)} (built-in: {', '.join(names)})")
+                              f"{hint(name_or_path, names)} (built-in: {', '.join(names)}; "
+                              f"a scenario file must end in .toml)")
         path = builtin_path(name_or_path)
     return scenario_from_mapping(load_toml(path), str(path), path.parent, params_override)
 
+
+
+def run_scenario(sc: Scenario, controller: str | None = None,
+                 obstacle_source: str | None = None) -> Log:
+    """Simulate a scenario (optionally with another controller or obstacle source)."""
+    params = sc.params
+    return run_episode(make_controller(controller or sc.controller, params), sc.person, params,
+                       sc.duration, start=sc.start, seed=sc.seed, obstacles=sc.obstacles,
+                       perception=make_perception(obstacle_source or sc.obstacle_source,
+                                                  params))

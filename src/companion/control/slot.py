@@ -1,0 +1,67 @@
+"""Slot geometry shared by the baseline controllers (PID, VSM, IC).
+
+Notation (world frame, ``e(a) = (cos a, sin a)``, ``e_perp(a) = (-sin a, cos a)``):
+
+* reference point of the robot ``R = p + d e(theta)`` (Eq. 2);
+* desired slot point ``S = h + rho_d e(theta_h + alpha_d)``;
+* slot velocity, from the person's velocity ``(v_h, omega_h)``:
+  ``S_dot = v_h e(theta_h) + rho_d omega_h e_perp(theta_h + alpha_d)``;
+* offset-point kinematics: ``R_dot = v e(theta) + d omega e_perp(theta)``, inverted (``d > 0``) by
+  ``v = e(theta).V``, ``omega = e_perp(theta).V / d`` for a desired velocity ``V`` of R.
+
+At the equilibrium of a person walking with constant ``(v_h, omega_h)`` (robot in its slot with
+the heading of :func:`companion.model.slot_reference`), mapping ``V = S_dot`` through the inverse
+kinematics gives exactly the input that holds the slot: ``(v_ref, omega_h)``.
+"""
+
+from __future__ import annotations
+
+import math
+
+from companion.control.base import PersonState, Pose
+from companion.params import Params
+
+
+def reference_point(robot: Pose, d: float) -> tuple[float, float]:
+    """R, the point ``d`` ahead of the wheel axle."""
+    return robot.x + d * math.cos(robot.theta), robot.y + d * math.sin(robot.theta)
+
+
+def slot_point(person: PersonState, params: Params) -> tuple[float, float]:
+    """S, the desired position of R."""
+    f = params.formation
+    a = person.theta + f.bearing
+    return person.x + f.distance * math.cos(a), person.y + f.distance * math.sin(a)
+
+
+def slot_velocity(person: PersonState, params: Params) -> tuple[float, float]:
+    """S_dot, the velocity of the slot point given the person's ``(v_h, omega_h)``."""
+    f = params.formation
+    a = person.theta + f.bearing
+    w = f.distance * person.omega
+    return (person.v * math.cos(person.theta) - w * math.sin(a),
+            person.v * math.sin(person.theta) + w * math.cos(a))
+
+
+def point_velocity(theta: float, v: float, omega: float, d: float) -> tuple[float, float]:
+    """R_dot for the input ``(v, omega)`` at heading ``theta``."""
+    c, s = math.cos(theta), math.sin(theta)
+    return v * c - d * omega * s, v * s + d * omega * c
+
+
+def to_inputs(theta: float, vx: float, vy: float, d: float) -> tuple[float, float]:
+    """Inverse offset-point kinematics: the ``(v, omega)`` that move R with ``(vx, vy)``."""
+    c, s = math.cos(theta), math.sin(theta)
+    return c * vx + s * vy, (-s * vx + c * vy) / d
+
+
+def to_frame(angle: float, x: float, y: float) -> tuple[float, float]:
+    """World vector ``(x, y)`` in a frame rotated by ``angle``."""
+    c, s = math.cos(angle), math.sin(angle)
+    return c * x + s * y, -s * x + c * y
+
+
+def from_frame(angle: float, x: float, y: float) -> tuple[float, float]:
+    """Vector ``(x, y)`` of a frame rotated by ``angle`` in the world frame."""
+    c, s = math.cos(angle), math.sin(angle)
+    return c * x - s * y, s * x + c * y

@@ -1,0 +1,203 @@
+"""``companion reproduce``: the paper's Fig. 3, Table 2, Fig. 4 and Fig. 7, side by side.
+
+Every number comes from a simulation run here; the paper's published Table 2 is kept beside
+ours for comparison (:data:`PAPER_TABLE2`, in the paper's units).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterable, Sequence
+
+from companion import metrics, plots
+from companion.control import CONTROLLERS
+from companion.io import save_figure, write_csv, write_text
+from companion.params import Params
+from companion.sim import convergence
+from companion.sim.scenario import load_scenario, run_scenario
+
+#: Table 2 trajectory name -> built-in scenario.
+TRAJECTORIES = {"Linear": "line", "8-shaped": "figure8", "Circle": "circle"}
+
+#: The paper's Table 2: (trajectory, method) -> (rho cm, alpha rad, beta rad, v m/s,
+#: omega mrad/s).
+PAPER_TABLE2 = {
+    ("Linear", "LQR"): (0.001, 0.005, 0.000, 0.001, 0.016),
+    ("Linear", "PID"): (0.281, 0.075, 0.000, 0.009, 0.028),
+    ("Linear", "VSM"): (3.743, 0.269, 0.000, 0.097, 0.036),
+    ("Linear", "IC"): (4.371, 0.094, 0.000, 0.184, 0.020),
+    ("8-shaped", "LQR"): (5.123, 0.012, 0.021, 0.072, 5.539),
+    ("8-shaped", "PID"): (5.579, 0.068, 0.031, 0.175, 5.555),
+    ("8-shaped", "VSM"): (13.873, 0.380, 0.135, 0.077, 35.750),
+    ("8-shaped", "IC"): (7.801, 0.093, 0.051, 0.08, 7.910),
+    ("Circle", "LQR"): (0.038, 0.006, 0.003, 0.050, 0.773),
+    ("Circle", "PID"): (2.411, 0.076, 0.023, 0.100, 8.541),
+    ("Circle", "VSM"): (1.612, 0.215, 0.068, 0.098, 9.795),
+    ("Circle", "IC"): (3.410, 0.096, 0.021, 0.087, 6.541),
+}
+
+#: Our controller name -> the paper's method name (lqr-paper has no row of its own there).
+PAPER_METHOD = {"lqr": "LQR", "pid": "PID", "vsm": "VSM", "ic": "IC"}
+
+TABLE2_COLUMNS = ("trajectory", "controller", "rmse_rho_m", "rmse_alpha_rad", "rmse_beta_rad",
+                  "rmsv_v_mps", "rmsv_omega_radps")
+
+
+@dataclass(frozen=True)
+class Table2Row:
+    trajectory: str
+    controller: str
+    metrics: dict
+
+    def values(self) -> tuple[float, float, float, float, float]:
+        m = self.metrics
+        return (m["rmse_rho_m"], m["rmse_alpha_rad"], m["rmse_beta_rad"], m["rmsv_v_mps"],
+                m["rmsv_omega_radps"])
+
+
+def controllers() -> list[str]:
+    """Every registered controller, ours first."""
+    return list(CONTROLLERS)
+
+
+def table2_row(trajectory: str, controller: str) -> Table2Row:
+    """One Table 2 cell row: the trajectory's scenario, robot starting in its slot."""
+    sc = load_scenario(TRAJECTORIES[trajectory])
+    return Table2Row(trajectory, controller, metrics.compute(run_scenario(sc, controller)))
+
+
+def table2_markdown(rows: Sequence[Table2Row]) -> str:
+    """Table 2 in the paper's units, with the paper's published values beside ours."""
+    lines = [
+        "# Table 2: companion accuracy without obstacles (robot starting in its slot)",
+        "",
+        "Ours: measured by `companion reproduce`. Paper: Su et al., Table 2. Units as in the "
+        "paper: rho in cm, alpha and beta in rad, v in m/s, omega in mrad/s.",
+        "",
+        "| trajectory | controller | rho (cm) | paper | alpha (rad) | paper | beta (rad) | paper "
+        "| v (m/s) | paper | omega (mrad/s) | paper |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        rho, alpha, beta, v, om = row.values()
+        ours = (rho * 100.0, alpha, beta, v, om * 1000.0)
+        paper = PAPER_TABLE2.get((row.trajectory, PAPER_METHOD.get(row.controller, "")))
+        cells = []
+        for i, value in enumerate(ours):
+            cells.append(f"{value:.3f}")
+            cells.append("" if paper is None else f"{paper[i]:.3f}")
+        lines.append(f"| {row.trajectory} | {row.controller} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def table2_text(rows: Sequence[Table2Row]) -> str:
+    """A plain-text Table 2 for the terminal (paper's units)."""
+    head = (f"{'trajectory':10s} {'controller':10s} {'rho cm':>8s} {'alpha':>7s} {'beta':>7s} "
+            f"{'v m/s':>7s} {'w mrad/s':>9s}   paper rho, alpha")
+    out = [head]
+    for row in rows:
+        rho, alpha, beta, v, om = row.values()
+        paper = PAPER_TABLE2.get((row.trajectory, PAPER_METHOD.get(row.controller, "")))
+        ref = "" if paper is None else f"   {paper[0]:.3f}, {paper[1]:.3f}"
+        out.append(f"{row.trajectory:10s} {row.controller:10s} {rho * 100:8.3f} {alpha:7.4f} "
+                   f"{beta:7.4f} {v:7.3f} {om * 1000:9.2f}{ref}")
+    return "\n".join(out)
+
+
+Progress = Callable[[Iterable], Iterable]
+
+
+def reproduce(out: Path, progress: Progress = lambda it: it) -> list[Table2Row]:
+    """Run Fig. 3, Table 2, Fig. 4 and Fig. 7 and write their files into ``out``."""
+    names = controllers()
+    jobs: list[tuple[str, object]] = [("fig3", case) for case in convergence.cases()]
+    jobs += [("table2", (traj, ctl)) for traj in TRAJECTORIES for ctl in names]
+    jobs += [("fig4", ctl) for ctl in names] + [("fig7", "lqr")]
+    fig3_runs: dict[float, list] = {}
+    fig3_rows, rows, fig4_runs = [], [], {}
+    fig7_log = None
+    for kind, job in progress(jobs):
+        if kind == "fig3":
+            log, m = convergence.run_case(job, "lqr", Params())
+            fig3_runs.setdefault(job.speed, []).append((job.label, job.side, log))
+            settle = m["settling_time_s"]
+            fig3_rows.append((job.speed, job.start.x, job.start.y, job.start.theta, job.side,
+                              "" if settle is None else settle, m["min_person_distance_m"]))
+        elif kind == "table2":
+            rows.append(table2_row(*job))
+        elif kind == "fig4":
+            fig4_runs[job] = run_scenario(load_scenario("fig4"), job)
+        else:
+            fig7_log = run_scenario(load_scenario("fig7"), job)
+    write_csv(out / "fig3.csv", ("person_speed_mps", "start_x_m", "start_y_m",
+                                 "start_theta_rad", "side", "settling_time_s",
+                                 "min_person_distance_m"), fig3_rows)
+    for speed, runs in fig3_runs.items():
+        _save(plots.convergence(runs, f"Fig. 3: person at {speed:g} m/s (lqr)"),
+              out / f"fig3_{speed:g}mps.png")
+    write_csv(out / "table2.csv", TABLE2_COLUMNS,
+              ([r.trajectory, r.controller, *r.values()] for r in rows))
+    write_text(out / "table2.md", table2_markdown(rows))
+    write_csv(out / "fig4.csv", FIG4_COLUMNS, fig4_rows(fig4_runs))
+    _scenario_figures(out, "fig4", fig4_runs)
+    _scenario_figures(out, "fig7", {"lqr": fig7_log})
+    return rows
+
+
+FIG4_COLUMNS = ("controller", "obstacle_collisions", "min_obstacle_clearance_m",
+                "min_person_distance_m", "rmse_rho_m", "rmse_alpha_rad", "rmse_beta_rad")
+
+
+def fig4_rows(runs: dict) -> list[list]:
+    """Per controller: collisions, clearances and RMSE over the Fig. 4 run."""
+    rows = []
+    for name, log in runs.items():
+        m = metrics.compute(log)
+        rows.append([name] + [m[k] for k in FIG4_COLUMNS[1:]])
+    return rows
+
+
+def fig4_text(path: Path) -> str:
+    """The Fig. 4 table written by :func:`reproduce`, for the terminal."""
+    import csv
+    with open(path) as fh:
+        rows = list(csv.DictReader(fh))
+    out = [f"{'controller':10s} {'collisions':>10s} {'clearance m':>11s} {'person m':>8s} "
+           f"{'rho cm':>7s} {'alpha':>6s}"]
+    for r in rows:
+        out.append(f"{r['controller']:10s} {int(r['obstacle_collisions']):>10d} "
+                   f"{float(r['min_obstacle_clearance_m']):>11.3f} "
+                   f"{float(r['min_person_distance_m']):>8.2f} "
+                   f"{float(r['rmse_rho_m']) * 100:>7.1f} {float(r['rmse_alpha_rad']):>6.3f}")
+    return "\n".join(out)
+
+
+def _scenario_figures(out: Path, name: str, runs: dict) -> None:
+    sc = load_scenario(name)
+    title = f"{name}: {', '.join(runs)}"
+    _save(plots.trajectories(runs, title, obstacles=sc.obstacles, avoidance=sc.params.avoidance,
+                             footprint=sc.params.robot.radius),
+          out / f"{name}a_trajectories.png")
+    _save(plots.errors_over_time(runs, title), out / f"{name}b_errors.png")
+    _save(plots.inputs_over_time(runs, sc.params, title), out / f"{name}c_inputs.png")
+    _save(plots.avoidance_over_time(runs, sc.obstacles, sc.params, title),
+          out / f"{name}d_avoidance.png")
+
+
+def _save(fig, path: Path) -> None:
+    save_figure(fig, path)
+    plots.close(fig)
+
+
+def fig3_summary(path: Path) -> str:
+    """One line on the Fig. 3 runs written by :func:`reproduce`."""
+    import csv
+    with open(path) as fh:
+        rows = list(csv.DictReader(fh))
+    settled = [float(r["settling_time_s"]) for r in rows if r["settling_time_s"]]
+    closest = min(float(r["min_person_distance_m"]) for r in rows)
+    worst = max(settled) if settled else math.nan
+    return (f"Fig. 3: {len(settled)}/{len(rows)} runs settled (worst {worst:.2f} s), "
+            f"closest approach {closest:.2f} m")

@@ -1,0 +1,149 @@
+"""One tuning procedure and budget for every controller (``companion tune``).
+
+Procedure: seeded random search. Candidate 0 is the controller's current gains; the other
+``budget - 1`` candidates are drawn log-uniformly inside the box :data:`SPACES` gives for the
+controller. Each candidate runs the three tuning scenarios of :func:`tuning_scenarios`, which
+are *not* evaluation scenarios (those are the straight line at 1 m/s, the 3 m circle, the
+figure-8, Fig. 3, Fig. 4 and Fig. 7), and scores
+
+    J = mean over scenarios of (RMSE rho / 0.05 m + RMSE alpha / 0.05 rad)
+
+plus 100 per scenario that comes closer than 0.5 m to the person or produces a non-finite
+value. The candidate with the lowest J wins. Every controller gets the same budget (default 64
+candidates) and the same scenarios, so none is favoured.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Callable, Iterable, Sequence
+
+import numpy as np
+
+from companion import metrics
+from companion.control import make_controller
+from companion.control.base import Pose
+from companion.params import Params
+from companion.sim.episode import run_episode
+from companion.sim.person import PersonMotion, Segment, SegmentPath, circle, line
+
+
+@dataclass(frozen=True)
+class Dim:
+    """One tuned value: ``section.field`` (``index`` for tuple fields), searched log-uniformly
+    in [low, high]."""
+
+    section: str
+    field: str
+    low: float
+    high: float
+    index: int | None = None
+
+    @property
+    def name(self) -> str:
+        return f"{self.section}.{self.field}" + ("" if self.index is None else f"[{self.index}]")
+
+
+SPACES: dict[str, tuple[Dim, ...]] = {
+    "lqr": tuple(Dim("lqr", "q", 1.0, 300.0, i) for i in range(5))
+    + tuple(Dim("lqr", "r", 1.0, 300.0, i) for i in range(2)),
+    "pid": (Dim("pid", "kp_x", 0.2, 5.0), Dim("pid", "ki_x", 0.01, 2.0),
+            Dim("pid", "kd_x", 0.01, 1.0), Dim("pid", "kp_y", 0.2, 8.0),
+            Dim("pid", "ki_y", 0.01, 2.0), Dim("pid", "kd_y", 0.01, 1.0),
+            Dim("pid", "kp_theta", 0.2, 6.0)),
+    "vsm": (Dim("vsm", "stiffness", 0.2, 20.0), Dim("vsm", "damping", 0.1, 20.0),
+            Dim("vsm", "mass", 0.1, 5.0)),
+    "ic": tuple(Dim("impedance", f, lo, hi, i) for f, lo, hi in
+                (("mass", 0.1, 5.0), ("damping", 0.1, 20.0), ("stiffness", 0.2, 20.0))
+                for i in range(2)),
+}
+
+
+@dataclass(frozen=True)
+class TuningCase:
+    name: str
+    person: PersonMotion
+    duration: float
+    start: Pose | None
+    bearing: float
+
+
+def tuning_scenarios() -> list[TuningCase]:
+    """Three scenarios unlike the evaluation ones: a 4 m circle to the right at 0.8 m/s (robot
+    outside), an S-curve with speed changes, and a catch-up from 1.5 m behind the slot."""
+    s_curve = SegmentPath((0.0, 0.0, 0.0), [
+        Segment(4.0, 0.5, 1.2), Segment(6.0, 1.2, 1.2, 0.35), Segment(6.0, 1.2, 0.8, -0.35),
+        Segment(4.0, 0.8, 0.8)])
+    return [
+        TuningCase("circle-4m-right", circle((0.0, 0.0, 0.0), 4.0, 0.8, "right"), 30.0, None,
+                   0.5 * math.pi),
+        TuningCase("s-curve", s_curve, 20.0, None, 1.5 * math.pi),
+        TuningCase("catch-up", line((0.0, 0.0, 0.0), 0.8), 25.0, Pose(-1.75, 1.0, 0.0),
+                   0.5 * math.pi),
+    ]
+
+
+def apply(params: Params, dims: Sequence[Dim], values: Sequence[float]) -> Params:
+    """``params`` with each ``dims[i]`` set to ``values[i]``."""
+    for dim, value in zip(dims, values):
+        section = getattr(params, dim.section)
+        current = getattr(section, dim.field)
+        if dim.index is not None:
+            current = tuple(value if i == dim.index else c for i, c in enumerate(current))
+        else:
+            current = float(value)
+        params = dataclasses.replace(
+            params, **{dim.section: dataclasses.replace(section, **{dim.field: current})})
+    return params
+
+
+def current(params: Params, dims: Sequence[Dim]) -> list[float]:
+    out = []
+    for dim in dims:
+        value = getattr(getattr(params, dim.section), dim.field)
+        out.append(float(value if dim.index is None else value[dim.index]))
+    return out
+
+
+def score(controller: str, params: Params, cases: Sequence[TuningCase]) -> float:
+    """The tuning objective J (module docstring) of ``params`` for ``controller``."""
+    total = 0.0
+    for case in cases:
+        p = dataclasses.replace(params, formation=dataclasses.replace(params.formation,
+                                                                      bearing=case.bearing))
+        log = run_episode(make_controller(controller, p), case.person, p, case.duration,
+                          start=case.start)
+        m = metrics.compute(log)
+        j = m["rmse_rho_m"] / 0.05 + m["rmse_alpha_rad"] / 0.05
+        if not m["finite"] or not math.isfinite(j) or m["min_person_distance_m"] < 0.5:
+            j = 100.0 + (j if math.isfinite(j) else 0.0)
+        total += j
+    return total / len(cases)
+
+
+@dataclass(frozen=True)
+class TuneResult:
+    controller: str
+    dims: tuple[Dim, ...]
+    best: tuple[float, ...]
+    best_score: float
+    start_score: float
+    evaluations: int
+
+
+def tune(controller: str, params: Params = Params(), budget: int = 64, seed: int = 0,
+         progress: Callable[[Iterable], Iterable] = lambda it: it) -> TuneResult:
+    """Seeded random search (module docstring) with ``budget`` candidates."""
+    dims = SPACES[controller]
+    cases = tuning_scenarios()
+    rng = np.random.default_rng(seed)
+    lows = np.log([d.low for d in dims])
+    highs = np.log([d.high for d in dims])
+    candidates = [current(params, dims)] + [list(np.exp(rng.uniform(lows, highs)))
+                                            for _ in range(budget - 1)]
+    scores = [score(controller, apply(params, dims, c), cases) for c in progress(candidates)]
+    best = int(np.argmin(scores))
+    return TuneResult(controller, dims, tuple(candidates[best]), scores[best], scores[0],
+                      budget)

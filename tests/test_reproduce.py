@@ -1,0 +1,59 @@
+"""`companion reproduce`: files written, and its Table 2 equals re-running single scenarios."""
+
+import csv
+import json
+
+import pytest
+
+from companion.cli import main
+from companion.control import CONTROLLERS
+from companion.reproduce import PAPER_TABLE2, TABLE2_COLUMNS, TRAJECTORIES
+
+
+@pytest.fixture(scope="module")
+def out(tmp_path_factory):
+    path = tmp_path_factory.mktemp("reproduce")
+    assert main(["reproduce", "--out", str(path)]) == 0
+    return path
+
+
+def test_files(out):
+    for name in ("table2.csv", "table2.md", "fig3.csv", "fig4.csv", "fig3_0.5mps.png", "fig3_1mps.png",
+                 "fig4a_trajectories.png", "fig4b_errors.png", "fig4c_inputs.png",
+                 "fig4d_avoidance.png", "fig7a_trajectories.png", "fig7d_avoidance.png"):
+        assert (out / name).stat().st_size > 0, name
+    assert not list(out.glob(".*.tmp"))
+
+
+def test_table2_has_every_controller_and_trajectory(out):
+    with open(out / "table2.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert tuple(rows[0]) == TABLE2_COLUMNS
+    assert {(r["trajectory"], r["controller"]) for r in rows} == {
+        (t, c) for t in TRAJECTORIES for c in CONTROLLERS}
+    md = (out / "table2.md").read_text()
+    assert "5.123" in md and "lqr-paper" in md      # the paper's numbers beside ours
+
+
+def test_fig3_all_settle(out):
+    with open(out / "fig3.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 48
+    assert all(r["settling_time_s"] and float(r["settling_time_s"]) <= 20.0 for r in rows)
+
+
+@pytest.mark.parametrize("trajectory, controller", [("8-shaped", "lqr"), ("Circle", "pid"),
+                                                    ("Linear", "vsm"), ("8-shaped", "ic")])
+def test_table2_matches_single_runs(out, tmp_path, trajectory, controller):
+    with open(out / "table2.csv") as fh:
+        row = next(r for r in csv.DictReader(fh)
+                   if r["trajectory"] == trajectory and r["controller"] == controller)
+    assert main(["run", TRAJECTORIES[trajectory], "--controller", controller,
+                 "--out", str(tmp_path)]) == 0
+    m = json.loads((tmp_path / "metrics.json").read_text())
+    for key in TABLE2_COLUMNS[2:]:
+        assert float(row[key]) == pytest.approx(m[key], rel=1e-9, abs=1e-12), key
+
+
+def test_paper_table_is_complete():
+    assert len(PAPER_TABLE2) == 12
