@@ -261,7 +261,7 @@ class OneLineParser(argparse.ArgumentParser):
 def cmd_reproduce(args: argparse.Namespace) -> int:
     out = output_dir(Path(args.out or Path("out") / "reproduce"))
     print(f"Reproducing Fig. 3, Table 2, Fig. 4 and Fig. 7 with {', '.join(CONTROLLERS)} "
-          f"into {out} (about 2 minutes)")
+          f"into {out} (about 1 minute)")
     rows = reproduce.reproduce(out, progress=lambda jobs: tqdm(jobs, unit="run",
                                                                file=sys.stderr))
     print(reproduce.fig3_summary(out / "fig3.csv"))
