@@ -56,6 +56,13 @@ def _positive(text: str, what: str) -> float:
     return value
 
 
+def params_arg(args: argparse.Namespace) -> Params:
+    """Table 1 defaults, or the ``--params FILE`` given, validated with the file's name."""
+    if not args.params:
+        return Params()
+    return params_from_mapping(load_toml(args.params), prefix=f"{args.params}: ")
+
+
 def _overrides(args: argparse.Namespace) -> dict:
     """Parameter overrides from --params, --side, --bearing and --distance."""
     over: dict = {}
@@ -176,9 +183,7 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
 
 
 def cmd_convergence(args: argparse.Namespace) -> int:
-    params = Params()
-    if args.params:
-        params = params_from_mapping(load_toml(args.params), prefix=f"{args.params}: ")
+    params = params_arg(args)
     if args.controller not in CONTROLLERS:
         make_controller(args.controller, params)  # raises with a hint
     speeds = _floats(args.speeds, len(args.speeds.split(",")), "--speeds")
@@ -220,9 +225,7 @@ def cmd_convergence(args: argparse.Namespace) -> int:
 
 
 def cmd_pedestrians(args: argparse.Namespace) -> int:
-    params = Params()
-    if args.params:
-        params = params_from_mapping(load_toml(args.params), prefix=f"{args.params}: ")
+    params = params_arg(args)
     if args.side:
         params = params.replace(formation=dataclasses.replace(
             params.formation, bearing=SIDES[args.side]))
@@ -274,9 +277,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
 
 def cmd_tune(args: argparse.Namespace) -> int:
-    params = Params()
-    if args.params:
-        params = params_from_mapping(load_toml(args.params), prefix=f"{args.params}: ")
+    params = params_arg(args)
     if args.budget < 1:
         raise UsageError(f"--budget: expected a whole number >= 1, got {args.budget}")
     print(f"tuning {args.controller}: {args.budget} candidates, seed {args.seed}, "

@@ -28,7 +28,7 @@ heading, ``e = e_dot = 0`` and ``V = S_dot``: the input is exactly the one that 
 from __future__ import annotations
 
 from companion.control.base import Command, Observation, saturate
-from companion.control.slot import (from_frame, point_velocity, reference_point, slot_point,
+from companion.control.slot import (from_frame, last_velocity, reference_point, slot_point,
                                     slot_velocity, to_frame, to_inputs)
 from companion.params import Params
 
@@ -50,10 +50,7 @@ class ImpedanceController:
         rx, ry = reference_point(r, d)
         sx, sy = slot_point(h, p)
         sdx, sdy = slot_velocity(h, p)
-        if self._last is None:
-            rdx, rdy = sdx, sdy
-        else:
-            rdx, rdy = point_velocity(r.theta, self._last[0], self._last[1], d)
+        rdx, rdy = last_velocity(r.theta, self._last, d, (sdx, sdy))
         e = to_frame(h.theta, rx - sx, ry - sy)
         ed_world = to_frame(h.theta, rdx - sdx, rdy - sdy)
         e_dot = (ed_world[0] + w * e[1], ed_world[1] - w * e[0])

@@ -65,3 +65,12 @@ def from_frame(angle: float, x: float, y: float) -> tuple[float, float]:
     """Vector ``(x, y)`` of a frame rotated by ``angle`` in the world frame."""
     c, s = math.cos(angle), math.sin(angle)
     return c * x - s * y, s * x + c * y
+
+
+def last_velocity(theta: float, last: tuple[float, float] | None, d: float,
+                  fallback: tuple[float, float]) -> tuple[float, float]:
+    """Velocity of R under the last command actually sent (``last`` = (v, omega)) at heading
+    ``theta``; ``fallback`` (the slot velocity: a bumpless start) before any command."""
+    if last is None:
+        return fallback
+    return point_velocity(theta, last[0], last[1], d)

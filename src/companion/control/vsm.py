@@ -25,7 +25,7 @@ person and the position along the walk alike.
 from __future__ import annotations
 
 from companion.control.base import Command, Observation, saturate
-from companion.control.slot import (point_velocity, reference_point, slot_point, slot_velocity,
+from companion.control.slot import (last_velocity, reference_point, slot_point, slot_velocity,
                                     to_inputs)
 from companion.params import Params
 
@@ -47,10 +47,7 @@ class VsmController:
         rx, ry = reference_point(r, d)
         sx, sy = slot_point(h, p)
         sdx, sdy = slot_velocity(h, p)
-        if self._last is None:
-            rdx, rdy = sdx, sdy
-        else:
-            rdx, rdy = point_velocity(r.theta, self._last[0], self._last[1], d)
+        rdx, rdy = last_velocity(r.theta, self._last, d, (sdx, sdy))
         fx = g.stiffness * (sx - rx) - g.damping * (rdx - sdx)
         fy = g.stiffness * (sy - ry) - g.damping * (rdy - sdy)
         vx, vy = rdx + p.dt * fx / g.mass, rdy + p.dt * fy / g.mass
