@@ -70,3 +70,23 @@ def test_every_parameter_is_documented():
     text = DOCS.read_text()
     for key, unit, default, meaning in field_docs(Params):
         assert f"`{key}`" in text, f"{key} missing from docs/parameters.md"
+
+
+@pytest.mark.parametrize("bearing, distance", [("front", 0.5), ("left", 0.5)])
+def test_slot_inside_the_keep_out_is_rejected(tmp_path, bearing, distance):
+    f = tmp_path / "p.toml"
+    f.write_text(f'[formation]\nbearing = "{bearing}"\ndistance = {distance}\n')
+    with pytest.raises(ConfigError, match="formation.distance: the slot .* inside "
+                                          "safety.person_clearance"):
+        load_params(f)
+    f.write_text(f'[formation]\nbearing = "{bearing}"\ndistance = {distance}\n'
+                 '[safety]\nperson_clearance = 0.2\n')
+    assert load_params(f).formation.distance == distance
+
+
+def test_config_built_in_python_is_validated():
+    from companion.params import Formation
+    with pytest.raises(ConfigError, match="distance: expected a finite positive"):
+        Formation(distance=-1.0)
+    with pytest.raises(ConfigError, match="dt: expected a sample period"):
+        Params(dt=0.0)

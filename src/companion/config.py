@@ -149,7 +149,10 @@ def build(cls: type[T], mapping: Mapping[str, Any], prefix: str = "") -> T:
         converted = convert(value, hints[key], name)
         _check_field(f, converted, name)
         kwargs[key] = converted
-    return cls(**kwargs)
+    try:
+        return cls(**kwargs)
+    except ConfigError as exc:  # a check across fields (__post_init__): add the location
+        raise ConfigError(f"{prefix}{exc}") from None
 
 
 def validate(obj: Any, prefix: str = "") -> None:

@@ -183,6 +183,19 @@ class Params(Validated):
     vsm: VsmParams = param(VsmParams(), "", "")
     impedance: ImpedanceParams = param(ImpedanceParams(), "", "")
 
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        f, clearance = self.formation, self.safety.person_clearance
+        # robot centre (axle) in the slot, heading with the person: R - d e(theta_h)
+        cx = f.distance * math.cos(f.bearing) - self.robot.d
+        cy = f.distance * math.sin(f.bearing)
+        if clearance > 0.0 and math.hypot(cx, cy) < clearance:
+            raise ConfigError(
+                f"formation.distance: the slot at {f.distance:g} m, bearing {f.bearing:.3f} rad "
+                f"puts the robot centre {math.hypot(cx, cy):.2f} m from the person, inside "
+                f"safety.person_clearance ({clearance:g} m); expected a larger distance or a "
+                f"smaller clearance")
+
     def replace(self, **changes: Any) -> "Params":
         """A copy with top-level fields replaced, validated."""
         out = dataclasses.replace(self, **changes)
