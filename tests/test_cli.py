@@ -173,3 +173,13 @@ def test_readme_test_command_is_what_ci_runs():
     test_cmd = [l for l in readme.splitlines() if "pytest" in l and l.startswith("python3")]
     assert len(test_cmd) == 1
     assert test_cmd[0] in ci.splitlines()
+
+
+def test_convergence_command(tmp_path, capsys):
+    code, out, _ = run(["convergence", "--speeds", "1.0", "--out", str(tmp_path)], capsys)
+    assert code == 0
+    assert "24/24 runs settled within 20 s" in out
+    with open(tmp_path / "convergence.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 24 and all(r["ok"] == "1" for r in rows)
+    assert min(float(r["min_person_distance_m"]) for r in rows) >= 0.5

@@ -199,16 +199,13 @@ def cmd_convergence(args: argparse.Namespace) -> int:
         ok = settle is not None and settle <= args.settle_limit \
             and m["min_person_distance_m"] >= 0.5
         failures += not ok
-        rows.append((case.speed, case.start.x, case.start.y, case.start.theta, case.side,
-                     "" if settle is None else settle, m["min_person_distance_m"], int(ok)))
+        rows.append((*convergence.csv_row(case, m), int(ok)))
         runs.setdefault(case.speed, []).append((case.label, case.side, log))
         print(f"{case.speed:5.2f} {case.label:>10} {case.start.theta:8.3f} {case.side:>5} "
               f"{'never' if settle is None else f'{settle:.2f}':>9} "
               f"{m['min_person_distance_m']:10.3f}{'' if ok else '  FAIL'}")
     out = output_dir(Path(args.out or Path("out") / "convergence"))
-    write_csv(out / "convergence.csv", ("person_speed_mps", "start_x_m", "start_y_m",
-                                        "start_theta_rad", "side", "settling_time_s",
-                                        "min_person_distance_m", "ok"), rows)
+    write_csv(out / "convergence.csv", (*convergence.CSV_COLUMNS, "ok"), rows)
     written = ["convergence.csv"]
     if args.plot:
         for speed, speed_runs in runs.items():
@@ -265,13 +262,13 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     out = output_dir(Path(args.out or Path("out") / "reproduce"))
     print(f"Reproducing Fig. 3, Table 2, Fig. 4 and Fig. 7 with {', '.join(CONTROLLERS)} "
           f"into {out} (about 1 minute)")
-    rows = reproduce.reproduce(out, progress=lambda jobs: tqdm(jobs, unit="run",
-                                                               file=sys.stderr))
-    print(reproduce.fig3_summary(out / "fig3.csv"))
+    result = reproduce.reproduce(out, progress=lambda jobs: tqdm(jobs, unit="run",
+                                                                 file=sys.stderr))
+    print(reproduce.fig3_summary(result.fig3))
     print("Table 2 (ours; paper's LQR/PID/VSM/IC rho and alpha at the right):")
-    print(reproduce.table2_text(rows))
+    print(reproduce.table2_text(result.table2))
     print("Fig. 4 (figure-8 with the obstacle, every controller):")
-    print(reproduce.fig4_text(out / "fig4.csv"))
+    print(reproduce.fig4_text(result.fig4))
     print(f"wrote table2.csv, table2.md, fig3.csv, fig4.csv and the Fig. 3, 4, 7 PNGs in {out}")
     return 0
 

@@ -109,7 +109,16 @@ def table2_text(rows: Sequence[Table2Row]) -> str:
 Progress = Callable[[Iterable], Iterable]
 
 
-def reproduce(out: Path, progress: Progress = lambda it: it) -> list[Table2Row]:
+@dataclass(frozen=True)
+class Reproduction:
+    """What :func:`reproduce` measured: the rows of table2.csv, fig3.csv and fig4.csv."""
+
+    table2: list[Table2Row]
+    fig3: list[tuple]
+    fig4: list[list]
+
+
+def reproduce(out: Path, progress: Progress = lambda it: it) -> Reproduction:
     """Run Fig. 3, Table 2, Fig. 4 and Fig. 7 and write their files into ``out``."""
     names = controllers()
     jobs: list[tuple[str, object]] = [("fig3", case) for case in convergence.cases()]
@@ -122,28 +131,25 @@ def reproduce(out: Path, progress: Progress = lambda it: it) -> list[Table2Row]:
         if kind == "fig3":
             log, m = convergence.run_case(job, "lqr", Params())
             fig3_runs.setdefault(job.speed, []).append((job.label, job.side, log))
-            settle = m["settling_time_s"]
-            fig3_rows.append((job.speed, job.start.x, job.start.y, job.start.theta, job.side,
-                              "" if settle is None else settle, m["min_person_distance_m"]))
+            fig3_rows.append(convergence.csv_row(job, m))
         elif kind == "table2":
             rows.append(table2_row(*job))
         elif kind == "fig4":
             fig4_runs[job] = run_scenario(load_scenario("fig4"), job)
         else:
             fig7_log = run_scenario(load_scenario("fig7"), job)
-    write_csv(out / "fig3.csv", ("person_speed_mps", "start_x_m", "start_y_m",
-                                 "start_theta_rad", "side", "settling_time_s",
-                                 "min_person_distance_m"), fig3_rows)
+    write_csv(out / "fig3.csv", convergence.CSV_COLUMNS, fig3_rows)
     for speed, runs in fig3_runs.items():
         _save(plots.convergence(runs, f"Fig. 3: person at {speed:g} m/s (lqr)"),
               out / f"fig3_{speed:g}mps.png")
     write_csv(out / "table2.csv", TABLE2_COLUMNS,
               ([r.trajectory, r.controller, *r.values()] for r in rows))
     write_text(out / "table2.md", table2_markdown(rows))
-    write_csv(out / "fig4.csv", FIG4_COLUMNS, fig4_rows(fig4_runs))
+    fig4 = fig4_rows(fig4_runs)
+    write_csv(out / "fig4.csv", FIG4_COLUMNS, fig4)
     _scenario_figures(out, "fig4", fig4_runs)
     _scenario_figures(out, "fig7", {"lqr": fig7_log})
-    return rows
+    return Reproduction(rows, fig3_rows, fig4)
 
 
 FIG4_COLUMNS = ("controller", "obstacle_collisions", "min_obstacle_clearance_m",
@@ -159,18 +165,13 @@ def fig4_rows(runs: dict) -> list[list]:
     return rows
 
 
-def fig4_text(path: Path) -> str:
-    """The Fig. 4 table written by :func:`reproduce`, for the terminal."""
-    import csv
-    with open(path) as fh:
-        rows = list(csv.DictReader(fh))
+def fig4_text(rows: Sequence[Sequence]) -> str:
+    """The Fig. 4 rows (:func:`fig4_rows`) as a table for the terminal."""
     out = [f"{'controller':10s} {'collisions':>10s} {'clearance m':>11s} {'person m':>8s} "
            f"{'rho cm':>7s} {'alpha':>6s}"]
-    for r in rows:
-        out.append(f"{r['controller']:10s} {int(r['obstacle_collisions']):>10d} "
-                   f"{float(r['min_obstacle_clearance_m']):>11.3f} "
-                   f"{float(r['min_person_distance_m']):>8.2f} "
-                   f"{float(r['rmse_rho_m']) * 100:>7.1f} {float(r['rmse_alpha_rad']):>6.3f}")
+    for name, collisions, clearance, person, rho, alpha, _ in rows:
+        out.append(f"{name:10s} {collisions:>10d} {clearance:>11.3f} {person:>8.2f} "
+                   f"{rho * 100:>7.1f} {alpha:>6.3f}")
     return "\n".join(out)
 
 
@@ -191,13 +192,10 @@ def _save(fig, path: Path) -> None:
     plots.close(fig)
 
 
-def fig3_summary(path: Path) -> str:
-    """One line on the Fig. 3 runs written by :func:`reproduce`."""
-    import csv
-    with open(path) as fh:
-        rows = list(csv.DictReader(fh))
-    settled = [float(r["settling_time_s"]) for r in rows if r["settling_time_s"]]
-    closest = min(float(r["min_person_distance_m"]) for r in rows)
+def fig3_summary(rows: Sequence[Sequence]) -> str:
+    """One line on the Fig. 3 rows (:func:`companion.sim.convergence.csv_row`)."""
+    settled = [r[5] for r in rows if r[5] != ""]
+    closest = min(r[6] for r in rows)
     worst = max(settled) if settled else math.nan
     return (f"Fig. 3: {len(settled)}/{len(rows)} runs settled (worst {worst:.2f} s), "
             f"closest approach {closest:.2f} m")

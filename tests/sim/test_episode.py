@@ -6,7 +6,7 @@ import pytest
 from companion.control import make_controller
 from companion.kinematics import unicycle_step
 from companion.params import Params
-from companion.sim.episode import LOG_COLUMNS, SensorNoise, run_episode, start_in_slot
+from companion.sim.episode import LOG_COLUMNS, SensorNoise, run_episode
 from companion.sim.person import Figure8, circle, line
 
 

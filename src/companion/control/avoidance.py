@@ -24,7 +24,6 @@ into an angular-velocity offset ``u_ob`` that is added to the wrapped controller
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Sequence
 
 from companion.control.base import Command, Controller, Observation
@@ -127,7 +126,8 @@ class AvoidingController:
         cmd = self.inner.step(obs)
         r, h = obs.robot, obs.person
         # +1 when the person is on the robot's left
-        side = math.copysign(1.0, math.cos(r.theta) * (h.y - r.y) - math.sin(r.theta) * (h.x - r.x))
+        side = math.copysign(1.0, math.cos(r.theta) * (h.y - r.y)
+                             - math.sin(r.theta) * (h.x - r.x))
         acc = total_acceleration(r.x, r.y, r.theta, obs.obstacles, self.params, side)
         tau = self.params.avoidance.decay_time
         u_ob = self.u_ob * self._decay + acc * tau * (1.0 - self._decay)

@@ -13,7 +13,6 @@ contract tests in tests/control/test_contract.py run over every registered contr
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -83,6 +82,3 @@ def saturate(v: float, omega: float, robot: RobotParams) -> tuple[float, float]:
     return (min(max(v, -robot.v_max), robot.v_max),
             min(max(omega, -robot.omega_max), robot.omega_max))
 
-
-def is_finite_command(cmd: Command) -> bool:
-    return math.isfinite(cmd.v) and math.isfinite(cmd.omega)

@@ -28,20 +28,17 @@ heading, ``e = e_dot = 0`` and ``V = S_dot``: the input is exactly the one that 
 from __future__ import annotations
 
 from companion.control.base import Command, Observation, saturate
-from companion.control.slot import (from_frame, last_velocity, reference_point, slot_point,
-                                    slot_velocity, to_frame, to_inputs)
+from companion.control.slot import (LastCommand, from_frame, last_velocity, reference_point,
+                                    slot_point, slot_velocity, to_frame, to_inputs)
 from companion.params import Params
 
 
-class ImpedanceController:
+class ImpedanceController(LastCommand):
     """Per-axis impedance on the slot error in the person frame; see the module docstring."""
 
     def __init__(self, params: Params):
         self.params = params
         self.reset()
-
-    def reset(self) -> None:
-        self._last: tuple[float, float] | None = None   # last applied (v, omega)
 
     def step(self, obs: Observation) -> Command:
         p, g = self.params, self.params.impedance
@@ -60,7 +57,3 @@ class ImpedanceController:
         v, om = saturate(*to_inputs(r.theta, sdx + cx, sdy + cy, d), p.robot)
         self._last = (v, om)
         return Command(v, om)
-
-    def applied(self, cmd: Command) -> None:
-        """Store the command actually sent: it gives R_dot on the next step."""
-        self._last = (cmd.v, cmd.omega)

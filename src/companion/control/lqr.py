@@ -19,7 +19,6 @@ docs/model.md explains the choices and their measured effect.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np

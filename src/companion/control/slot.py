@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 
-from companion.control.base import PersonState, Pose
+from companion.control.base import Command, PersonState, Pose
 from companion.params import Params
 
 
@@ -74,3 +74,16 @@ def last_velocity(theta: float, last: tuple[float, float] | None, d: float,
     if last is None:
         return fallback
     return point_velocity(theta, last[0], last[1], d)
+
+
+class LastCommand:
+    """Base for controllers that remember the last command actually sent (VSM, IC): it gives
+    the velocity of R on the next step (:func:`last_velocity`), so saturation and the outer
+    layers cannot wind up their virtual state."""
+
+    def reset(self) -> None:
+        self._last: tuple[float, float] | None = None   # last applied (v, omega)
+
+    def applied(self, cmd: Command) -> None:
+        """Store the command actually sent: it gives R_dot on the next step."""
+        self._last = (cmd.v, cmd.omega)

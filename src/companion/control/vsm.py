@@ -25,20 +25,17 @@ person and the position along the walk alike.
 from __future__ import annotations
 
 from companion.control.base import Command, Observation, saturate
-from companion.control.slot import (last_velocity, reference_point, slot_point, slot_velocity,
-                                    to_inputs)
+from companion.control.slot import (LastCommand, last_velocity, reference_point, slot_point,
+                                    slot_velocity, to_inputs)
 from companion.params import Params
 
 
-class VsmController:
+class VsmController(LastCommand):
     """Spring-damper-mass between R and the slot; see the module docstring."""
 
     def __init__(self, params: Params):
         self.params = params
         self.reset()
-
-    def reset(self) -> None:
-        self._last: tuple[float, float] | None = None   # last applied (v, omega)
 
     def step(self, obs: Observation) -> Command:
         p, g = self.params, self.params.vsm
@@ -54,7 +51,3 @@ class VsmController:
         v, om = saturate(*to_inputs(r.theta, vx, vy, d), p.robot)
         self._last = (v, om)
         return Command(v, om)
-
-    def applied(self, cmd: Command) -> None:
-        """Store the command actually sent: it gives R_dot on the next step."""
-        self._last = (cmd.v, cmd.omega)

@@ -57,3 +57,14 @@ def run_case(case: Case, controller: str, params: Params, duration: float = 30.0
     log = run_episode(make_controller(controller, p), line(PERSON_START, case.speed), p,
                       duration, start=case.start)
     return log, metrics.compute(log)
+
+
+CSV_COLUMNS = ("person_speed_mps", "start_x_m", "start_y_m", "start_theta_rad", "side",
+               "settling_time_s", "min_person_distance_m")
+
+
+def csv_row(case: Case, m: dict) -> tuple:
+    """One row of :data:`CSV_COLUMNS` (settling time empty when the run never settles)."""
+    settle = m["settling_time_s"]
+    return (case.speed, case.start.x, case.start.y, case.start.theta, case.side,
+            "" if settle is None else settle, m["min_person_distance_m"])
