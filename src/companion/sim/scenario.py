@@ -43,7 +43,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
-from companion.config import build, convert, hint, load_toml, param, positive, reject_unknown
+from companion.config import (build, convert, hint, load_toml, non_negative, param, positive,
+                              reject_unknown)
 from companion.control.base import Pose
 from companion.errors import ConfigError
 from companion.model import LEFT, RIGHT, relative_state
@@ -85,15 +86,11 @@ class UShapeSpec:
     turn: str = param("left", "-", "turn direction", choices=("left", "right"))
 
 
-def _non_negative_speed(x: float) -> str | None:
-    return None if 0.0 <= x < math.inf else "a finite speed >= 0"
-
-
 @dataclass(frozen=True)
 class SegmentSpec:
     duration: float = param(1.0, "s", "segment duration", positive)
-    v_start: float = param(1.0, "m/s", "speed at the segment start", _non_negative_speed)
-    v_end: float = param(1.0, "m/s", "speed at the segment end", _non_negative_speed)
+    v_start: float = param(1.0, "m/s", "speed at the segment start", non_negative)
+    v_end: float = param(1.0, "m/s", "speed at the segment end", non_negative)
     curvature: float = param(0.0, "1/m", "signed curvature, positive turns left")
 
 
@@ -106,10 +103,6 @@ class SegmentsSpec:
 @dataclass(frozen=True)
 class CsvSpec:
     path: str = param("", "-", "CSV file with header t,x,y; relative to the scenario file")
-
-
-def _non_negative(x: float) -> str | None:
-    return None if 0.0 <= x < math.inf else "a finite number >= 0"
 
 
 @dataclass(frozen=True)
