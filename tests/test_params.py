@@ -80,8 +80,20 @@ def test_slot_inside_the_keep_out_is_rejected(tmp_path, bearing, distance):
                                           "safety.person_clearance"):
         load_params(f)
     f.write_text(f'[formation]\nbearing = "{bearing}"\ndistance = {distance}\n'
-                 '[safety]\nperson_clearance = 0.2\n')
+                 '[safety]\nperson_clearance = 0.2\n[supervisor]\nprotective_distance = 0.2\n')
     assert load_params(f).formation.distance == distance
+
+
+def test_slot_inside_the_protective_distance_is_rejected(tmp_path):
+    f = tmp_path / "p.toml"
+    f.write_text('[formation]\nbearing = "front"\ndistance = 0.7\n'
+                 '[safety]\nperson_clearance = 0.2\n')
+    with pytest.raises(ConfigError, match="robot centre 0.45 m from the person, inside "
+                                          "supervisor.protective_distance"):
+        load_params(f)
+    f.write_text('[formation]\nbearing = "front"\ndistance = 0.7\n'
+                 '[safety]\nperson_clearance = 0.2\n[supervisor]\nprotective_distance = 0.4\n')
+    assert load_params(f).formation.distance == 0.7
 
 
 def test_config_built_in_python_is_validated():

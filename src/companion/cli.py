@@ -29,7 +29,7 @@ from companion.model import SIDES
 from companion.params import Params, params_from_mapping
 from companion.config import load_toml
 from companion.sim import convergence
-from companion.sim.episode import LOG_COLUMNS, Log
+from companion.sim.episode import LOG_COLUMNS, TEXT_COLUMNS, Log
 from companion.sim.recorded import load_person_csv
 from companion.sim.scenario import Scenario, builtin_names, load_scenario, run_scenario
 
@@ -104,7 +104,10 @@ def build_scenario(args: argparse.Namespace) -> Scenario:
 
 def write_log(path: Path, log: Log) -> None:
     cols = [log[c] for c in LOG_COLUMNS]
-    write_csv(path, LOG_COLUMNS, ([float(c[i]) for c in cols] for i in range(len(log))))
+    text = [log[c] for c in TEXT_COLUMNS]
+    write_csv(path, (*LOG_COLUMNS, *TEXT_COLUMNS),
+              ([float(c[i]) for c in cols] + [str(c[i]) for c in text]
+               for i in range(len(log))))
 
 
 def summary_lines(m: dict) -> list[str]:

@@ -94,6 +94,49 @@ class SafetyParams(Validated):
                                 "most at barrier_rate * (clearance - its minimum)", positive)
 
 
+def _fraction(x: float) -> str | None:
+    return None if 0.0 <= x <= 1.0 else "a fraction in [0, 1]"
+
+
+def _step_ratio(x: float) -> str | None:
+    return None if 1.0 < x < math.inf else "a finite ratio > 1"
+
+
+@dataclasses.dataclass(frozen=True)
+class SupervisorParams(Validated):
+    """Safety supervisor, the last layer before the motors (:mod:`companion.control.supervisor`,
+    docs/safety.md). Acceleration defaults are those of Nav2's velocity smoother."""
+
+    accel_max: float = param(2.5, "m/s^2", "limit on the rate at which |v| grows", positive)
+    decel_max: float = param(2.5, "m/s^2", "limit on the rate at which |v| shrinks; faults "
+                             "brake at this rate", positive)
+    angular_accel_max: float = param(3.2, "rad/s^2", "limit on the rate of change of omega",
+                                     positive)
+    person_timeout: float = param(0.5, "s", "a person estimate older than this is lost: brake "
+                                  "to a stop and hold (before it, the last estimate is "
+                                  "predicted forward at constant speed and turn rate)", positive)
+    max_person_speed: float = param(3.0, "m/s", "a person observation farther from the last "
+                                    "accepted one than this speed allows (plus jump_tolerance) "
+                                    "is an outlier (identity switch) and is rejected", positive)
+    jump_tolerance: float = param(0.2, "m", "position noise allowed on top of max_person_speed "
+                                  "in the outlier gate", non_negative)
+    reacquire_time: float = param(0.3, "s", "after the person was lost, observations must be "
+                                  "consistent with each other for this long before the robot "
+                                  "follows again", non_negative)
+    protective_distance: float = param(0.5, "m", "robot centre to person distance inside which "
+                                       "the robot may only rotate or move away; outside it the "
+                                       "speed towards the person is limited so that braking at "
+                                       "decel_max stops it here", positive)
+    person_accel: float = param(1.0, "m/s^2", "acceleration towards the robot a person may "
+                                "add; the braking-distance bound towards the person plans with "
+                                "the robot's rate limit minus this", non_negative)
+    max_step_ratio: float = param(3.0, "-", "a time step longer than max_step_ratio * dt (or "
+                                  "zero, negative or not finite) is a clock fault: the "
+                                  "controller's filters are reset", _step_ratio)
+    min_valid_returns: float = param(0.5, "-", "fraction of a LiDAR scan's beams that must be "
+                                     "valid (not NaN); below it the robot stops", _fraction)
+
+
 @dataclasses.dataclass(frozen=True)
 class AvoidanceParams(Validated):
     """Behavioural-dynamics obstacle avoidance (Sec. 3.3, Eq. 17-20)."""
@@ -176,6 +219,7 @@ class Params(Validated):
     formation: Formation = param(Formation(), "", "")
     lqr: LqrParams = param(LqrParams(), "", "")
     safety: SafetyParams = param(SafetyParams(), "", "")
+    supervisor: SupervisorParams = param(SupervisorParams(), "", "")
     avoidance: AvoidanceParams = param(AvoidanceParams(), "", "")
     lidar: LidarParams = param(LidarParams(), "", "")
     extractor: ExtractorParams = param(ExtractorParams(), "", "")
@@ -185,16 +229,19 @@ class Params(Validated):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        f, clearance = self.formation, self.safety.person_clearance
+        f = self.formation
         # robot centre (axle) in the slot, heading with the person: R - d e(theta_h)
         cx = f.distance * math.cos(f.bearing) - self.robot.d
         cy = f.distance * math.sin(f.bearing)
-        if clearance > 0.0 and math.hypot(cx, cy) < clearance:
-            raise ConfigError(
-                f"formation.distance: the slot at {f.distance:g} m, bearing {f.bearing:.3f} rad "
-                f"puts the robot centre {math.hypot(cx, cy):.2f} m from the person, inside "
-                f"safety.person_clearance ({clearance:g} m); expected a larger distance or a "
-                f"smaller clearance")
+        for name, keep in (("safety.person_clearance", self.safety.person_clearance),
+                           ("supervisor.protective_distance",
+                            self.supervisor.protective_distance)):
+            if math.hypot(cx, cy) < keep:
+                raise ConfigError(
+                    f"formation.distance: the slot at {f.distance:g} m, bearing "
+                    f"{f.bearing:.3f} rad puts the robot centre {math.hypot(cx, cy):.2f} m from "
+                    f"the person, inside {name} ({keep:g} m); expected a larger distance or a "
+                    f"smaller {name.split('.')[1]}")
 
     def replace(self, **changes: Any) -> "Params":
         """A copy with top-level fields replaced, validated."""

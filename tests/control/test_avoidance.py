@@ -161,12 +161,12 @@ def test_lqr_stores_what_the_layers_sent():
     command actually sent minus u_d (and minus u_ob)."""
     ctl = make_controller("lqr", P)
     ctl.reset()
-    lqr = ctl.inner
+    lqr = ctl.inner.inner   # supervisor -> avoidance -> LQR
     # robot right behind the person and facing them: the barrier must cut v
     obs = Observation(0.0, Pose(-0.7, 0.0, 0.0), PersonState(0.0, 0.0, 0.0, 0.0, 0.0),
                       (Circle(-0.3, 0.9, 0.15),))
-    for _ in range(5):
-        cmd = ctl.step(obs)
+    for k in range(5):
+        cmd = ctl.step(dataclasses.replace(obs, t=k * P.dt))
         u_d = np.array(lqr.last.u_d)
         np.testing.assert_allclose(lqr._u_e_prev,
                                    np.array([cmd.v, cmd.omega - cmd.u_ob]) - u_d, atol=1e-12)

@@ -26,9 +26,16 @@ def within_limits(log, p):
             and np.all(np.abs(log["omega"]) <= p.robot.omega_max + 1e-12))
 
 
+VSM_LIMIT_CYCLE = pytest.mark.xfail(
+    strict=True, reason="under the supervisor's angular acceleration limit the VSM falls into "
+    "a limit cycle from this start (docs/baselines.md)")
+
+
 @pytest.mark.parametrize("name", BASELINES)
 @pytest.mark.parametrize("where", sorted(OFF_SLOT))
-def test_converges_on_line_from_one_metre_off(name, where):
+def test_converges_on_line_from_one_metre_off(name, where, request):
+    if (name, where) == ("vsm", "outside"):
+        request.applymarker(VSM_LIMIT_CYCLE)
     p = Params()
     log = run_episode(make_controller(name, p), line((0.0, 0.0, 0.0), 1.0), p, 25.0,
                       start=OFF_SLOT[where])
@@ -40,7 +47,9 @@ def test_converges_on_line_from_one_metre_off(name, where):
 
 
 @pytest.mark.parametrize("name", BASELINES)
-def test_far_start_saturates_without_wild_overshoot(name):
+def test_far_start_saturates_without_wild_overshoot(name, request):
+    if name == "vsm":
+        request.applymarker(VSM_LIMIT_CYCLE)
     p = Params()
     log = run_episode(make_controller(name, p), line((0.0, 0.0, 0.0), 1.0), p, 30.0,
                       start=Pose(-4.0, 4.0, 0.0))
@@ -70,7 +79,8 @@ def test_exact_at_the_circle_equilibrium(name):
     h, f, d = person.state(0.0), p.formation, p.robot.d
     ref = slot_reference(h.v, h.omega, f.distance, f.bearing, d)
     start = Pose(*robot_pose_at(f.distance, f.bearing, ref.beta, h.x, h.y, h.theta, d))
-    log = run_episode(make_controller(name, p), person, p, 20.0, start=start)
+    log = run_episode(make_controller(name, p), person, p, 20.0, start=start,
+                      start_velocity=(ref.v, ref.omega))
     e = metrics.errors(log)
     assert np.max(np.abs(e["rho"])) < 1e-6
     assert np.max(np.abs(e["alpha"])) < 1e-6

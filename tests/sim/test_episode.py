@@ -6,7 +6,7 @@ import pytest
 from companion.control import make_controller
 from companion.kinematics import unicycle_step
 from companion.params import Params
-from companion.sim.episode import LOG_COLUMNS, SensorNoise, run_episode
+from companion.sim.episode import LOG_COLUMNS, TEXT_COLUMNS, SensorNoise, run_episode
 from companion.sim.person import Figure8, circle, line
 
 
@@ -33,8 +33,9 @@ def test_plant_is_exact_unicycle():
 def test_log_columns_and_length():
     p = Params()
     log = run_episode(make_controller("lqr", p), line((0.0, 0.0, 0.0), 1.0), p, 2.0)
-    assert set(log.columns) == set(LOG_COLUMNS)
+    assert set(log.columns) == set(LOG_COLUMNS) | set(TEXT_COLUMNS)
     assert len(log) == 40
+    assert set(log["status"]) == {"ok"} and set(log["reason"]) == {""}
     assert log["t"][-1] == pytest.approx(1.95)
 
 

@@ -15,6 +15,7 @@ from companion.control.base import Command, Controller, Observation, PersonState
 from companion.control.impedance import ImpedanceController
 from companion.control.lqr import LqrController
 from companion.control.pid import PidController
+from companion.control.supervisor import SafetySupervisor
 from companion.control.vsm import VsmController
 from companion.errors import ConfigError
 from companion.config import hint
@@ -66,18 +67,18 @@ CONTROLLERS: dict[str, Entry] = {
 }
 
 
-def make_controller(name: str, params: Params) -> Controller:
-    """Construct the registered controller ``name`` inside the avoidance and safety layer
-    (the same module for every controller, as in the paper's Fig. 4); unknown names raise
-    ConfigError."""
+def make_controller(name: str, params: Params) -> SafetySupervisor:
+    """Construct the registered controller ``name`` inside the avoidance layer (the same
+    module for every controller, as in the paper's Fig. 4) and the safety supervisor (the
+    standard stack); unknown names raise ConfigError."""
     if name not in CONTROLLERS:
         raise ConfigError(f"controller: unknown controller {name!r}{hint(name, CONTROLLERS)} "
                           f"(known: {', '.join(CONTROLLERS)})")
     entry = CONTROLLERS[name]
     params = entry.adjust(params)
-    return AvoidingController(entry.factory(params), params)
+    return SafetySupervisor(AvoidingController(entry.factory(params), params), params)
 
 
 __all__ = ["AvoidingController", "CONTROLLERS", "Command", "Controller", "ImpedanceController",
-           "LqrController", "Observation", "PersonState", "PidController", "Pose",
+           "LqrController", "Observation", "PersonState", "PidController", "Pose", "SafetySupervisor",
            "VsmController", "make_controller", "paper_lqr", "paper_params", "saturate"]

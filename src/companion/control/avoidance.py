@@ -140,4 +140,5 @@ class AvoidingController:
         return final
 
     def applied(self, cmd: Command) -> None:
-        """Nothing to store: the final command is computed here."""
+        """Pass the command finally sent (after the safety supervisor) on to the controller."""
+        self.inner.applied(cmd)

@@ -18,6 +18,7 @@ from typing import Protocol
 
 from companion.obstacles import Obstacle
 from companion.params import RobotParams
+from companion.perception import Scan
 
 
 @dataclass(frozen=True)
@@ -42,13 +43,21 @@ class PersonState:
 
 @dataclass(frozen=True)
 class Observation:
-    """What a controller sees at one sample: time (s), robot pose, person state and the
-    obstacles known at that time (world frame; ground truth or detected)."""
+    """What a controller sees at one sample: time (s), robot pose, person state, the
+    obstacles known at that time (world frame; ground truth or detected) and the latest LiDAR
+    scan they came from (None without a LiDAR).
+
+    Raw sensor data may be missing (``person`` None) or corrupt (NaN or Inf anywhere, time
+    going backwards): only :class:`~companion.control.supervisor.SafetySupervisor` accepts
+    such observations. It passes the controllers inside it a checked observation: a finite
+    person state and robot pose, finite obstacles and a time that advances.
+    """
 
     t: float
     robot: Pose
-    person: PersonState
+    person: PersonState | None
     obstacles: tuple[Obstacle, ...] = ()
+    scan: Scan | None = None
 
 
 @dataclass(frozen=True)
@@ -56,11 +65,15 @@ class Command:
     """Robot input: linear velocity v (m/s) and angular velocity omega (rad/s).
 
     ``u_ob`` (rad/s) is the part of omega that obstacle avoidance added, for logs and plots.
+    ``status`` ("ok", "degraded" or "stopped") and ``reason`` (empty when ok) are set by the
+    safety supervisor (docs/safety.md).
     """
 
     v: float
     omega: float
     u_ob: float = 0.0
+    status: str = "ok"
+    reason: str = ""
 
 
 class Controller(Protocol):

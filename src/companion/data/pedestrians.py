@@ -27,7 +27,8 @@ from companion.errors import DataError
 from companion.metrics import compute
 from companion.params import Params
 from companion.sim.episode import run_episode
-from companion.sim.recorded import DEFAULT_SMOOTHING, RecordedPerson, parse_number
+from companion.sim.recorded import (DEFAULT_SMOOTHING, RecordedPerson, gap_faults,
+                                    parse_number)
 
 #: Frames per second of the ETH/UCY annotations: time = frame / FRAME_RATE.
 FRAME_RATE = 25.0
@@ -250,7 +251,8 @@ def evaluate_tracks(tracks: Iterable[Track], params: Params, controller_name: st
     for track in tracks:
         person = RecordedPerson(track.t, track.x, track.y, smoothing=smoothing)
         log = run_episode(make_controller(controller_name, params), person, params,
-                          duration=person.duration, start=None)
+                          duration=person.duration, start=None,
+                          faults=gap_faults(person, params.supervisor.person_timeout))
         metrics = compute(log)
         rows.append({
             "scene": track.scene,

@@ -16,12 +16,13 @@ from typing import Sequence
 import numpy as np
 
 from companion.control.avoidance import clearance
-from companion.control.base import Controller, Observation, PersonState, Pose
+from companion.control.base import Command, Controller, Observation, PersonState, Pose
 from companion.kinematics import unicycle_step
 from companion.errors import ConfigError
 from companion.model import relative_state, robot_pose_at, slot_reference
 from companion.obstacles import Obstacle
 from companion.params import Params
+from companion.sim.faults import Fault, apply as apply_faults, stalled
 from companion.sim.sensing import GroundTruth, Perception
 from companion.sim.person import PersonMotion
 
@@ -30,6 +31,10 @@ LOG_COLUMNS = ("t", "robot_x", "robot_y", "robot_theta", "person_x", "person_y",
                "rho_d", "alpha_d", "beta_ref", "v", "omega", "u_ob", "rho_ob")
 """``u_ob``: the avoidance part of omega (rad/s); ``rho_ob``: clearance (m) from the robot's
 footprint to the nearest true obstacle surface (NaN without obstacles)."""
+
+TEXT_COLUMNS = ("status", "reason")
+"""The safety supervisor's status (ok, degraded, stopped) and reason per sample
+(docs/safety.md); "ok" and "" for controllers without a supervisor."""
 
 
 @dataclass(frozen=True)
@@ -44,7 +49,8 @@ class SensorNoise:
 
 @dataclass(frozen=True)
 class Log:
-    """Columns of one episode (names in :data:`LOG_COLUMNS`), each an array of length N."""
+    """Columns of one episode (names in :data:`LOG_COLUMNS`, float arrays, and
+    :data:`TEXT_COLUMNS`, string arrays), each of length N."""
 
     columns: dict[str, np.ndarray]
 
@@ -82,7 +88,8 @@ def nearest_clearance(x: float, y: float, obstacles: Sequence[Obstacle], footpri
 def run_episode(controller: Controller, person: PersonMotion, params: Params,
                 duration: float, start: Pose | None = None, seed: int = 0,
                 noise: SensorNoise = SensorNoise(), obstacles: Sequence[Obstacle] = (),
-                perception: Perception | None = None) -> Log:
+                perception: Perception | None = None, faults: Sequence[Fault] = (),
+                start_velocity: tuple[float, float] | None = None) -> Log:
     """Simulate ``duration`` seconds and return the log.
 
     Parameters
@@ -95,6 +102,11 @@ def run_episode(controller: Controller, person: PersonMotion, params: Params,
         Simulated time (s); ``round(duration / dt)`` steps are run.
     start : Pose, optional
         Robot start; default: in the desired slot, aligned with the person.
+    start_velocity : (v, omega), optional
+        The robot's velocity at the start, told to the controller as the command being
+        applied (``controller.applied``) so that its acceleration limits start from it.
+        Default: with ``start`` None, the slot velocity (already walking with the person);
+        with a ``start``, at rest.
     seed : int
         Seed of the sensor-noise generator.
     noise : SensorNoise
@@ -102,6 +114,8 @@ def run_episode(controller: Controller, person: PersonMotion, params: Params,
         The world's static obstacles.
     perception : Perception, optional
         How the controller learns about obstacles; default: it sees ``obstacles`` exactly.
+    faults : sequence of Fault
+        Faults injected into what the controller observes (:mod:`companion.sim.faults`).
     """
     dt, d = params.dt, params.robot.d
     f = params.formation
@@ -111,25 +125,42 @@ def run_episode(controller: Controller, person: PersonMotion, params: Params,
                           f"got {duration:g} s")
     rng = np.random.default_rng(seed)
     out = np.empty((n, len(LOG_COLUMNS)))
+    status: list[str] = []
+    reason: list[str] = []
     obstacles = tuple(obstacles)
     perception = perception or GroundTruth()
     perception.reset()
     controller.reset()
-    pose = start or start_in_slot(person.state(0.0), params)
+    if start is None:
+        h0 = person.state(0.0)
+        pose = start_in_slot(h0, params)
+        ref = slot_reference(h0.v, h0.omega, f.distance, f.bearing, d)
+        start_velocity = start_velocity or (ref.v, ref.omega)
+    else:
+        pose = start
+    if start_velocity is not None:
+        controller.applied(Command(*start_velocity))
     x, y, th = pose.x, pose.y, pose.theta
+    cmd = Command(0.0, 0.0)
     for k in range(n):
         t = k * dt
         h = person.state(t)
         seen = _observe(h, noise, rng)
         known = perception.obstacles(k, Pose(x, y, th), obstacles, (h.x, h.y),
                                      (seen.x, seen.y), rng)
-        obs = Observation(t, Pose(x, y, th), seen, known)
-        cmd = controller.step(obs)
+        if not stalled(faults, t):  # a stalled controller leaves the last command in force
+            obs = Observation(t, Pose(x, y, th), seen, known, perception.scan())
+            cmd = controller.step(apply_faults(obs, faults))
         rho, alpha, beta = relative_state(x, y, th, h.x, h.y, h.theta, d)
         beta_ref = slot_reference(h.v, h.omega, f.distance, f.bearing, d).beta
         out[k] = (t, x, y, th, h.x, h.y, h.theta, h.v, h.omega, rho, alpha, beta,
                   f.distance, f.bearing, beta_ref, cmd.v, cmd.omega, cmd.u_ob,
                   nearest_clearance(x, y, obstacles, params.robot.radius))
+        status.append(cmd.status)
+        reason.append(cmd.reason)
         x, y, th = unicycle_step(x, y, th, cmd.v, cmd.omega, dt)
         th = math.remainder(th, 2.0 * math.pi)
-    return Log({name: out[:, i] for i, name in enumerate(LOG_COLUMNS)})
+    columns: dict[str, np.ndarray] = {name: out[:, i] for i, name in enumerate(LOG_COLUMNS)}
+    columns["status"] = np.array(status, dtype=str)
+    columns["reason"] = np.array(reason, dtype=str)
+    return Log(columns)

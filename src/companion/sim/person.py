@@ -153,3 +153,64 @@ def u_shape(start: tuple[float, float, float] = (0.0, 0.0, 0.0), radius: float =
         Segment(half, v_turn, v_turn, k),
         Segment(3.0, v_turn, 1.2), Segment(4.0, 1.2, 1.2), Segment(4.0, 1.2, 0.3),
     ])
+
+
+@dataclass(frozen=True)
+class Move:
+    """One phase of a :class:`ScriptedWalk`: for ``duration`` s, head for speed ``speed``
+    (m/s, >= 0) at the walker's acceleration limit while turning at ``turn_rate`` (rad/s)."""
+
+    duration: float
+    speed: float
+    turn_rate: float = 0.0
+
+
+class ScriptedWalk:
+    """A person walking a script of :class:`Move` phases: stop-and-go, turns on the spot,
+    turnarounds. The unicycle is integrated exactly on a ``grid_step`` grid with the speed
+    ramping towards each phase's target at ``accel`` (m/s^2); :meth:`state` interpolates it
+    linearly. After the script the person stands still."""
+
+    def __init__(self, start: tuple[float, float, float], moves: Sequence[Move],
+                 accel: float = 1.5, grid_step: float = 0.01):
+        if not moves or accel <= 0.0 or grid_step <= 0.0:
+            raise ValueError("ScriptedWalk: needs moves, accel > 0 and grid_step > 0")
+        for i, m in enumerate(moves):
+            if not (m.duration > 0.0 and m.speed >= 0.0 and math.isfinite(m.turn_rate)):
+                raise ValueError(f"ScriptedWalk: move {i} needs duration > 0, speed >= 0 and "
+                                 "a finite turn rate")
+        self.moves = tuple(moves)
+        self.step = grid_step
+        x, y, th = start
+        v = 0.0
+        rows = [(x, y, th, v, 0.0)]
+        for m in self.moves:
+            for _ in range(max(1, int(round(m.duration / grid_step)))):
+                v_next = min(max(m.speed, v - accel * grid_step), v + accel * grid_step)
+                s = 0.5 * (v + v_next) * grid_step
+                w = m.turn_rate
+                if abs(w * grid_step) < 1e-12:
+                    x, y = x + s * math.cos(th), y + s * math.sin(th)
+                else:
+                    r = s / (w * grid_step)
+                    x += r * (math.sin(th + w * grid_step) - math.sin(th))
+                    y -= r * (math.cos(th + w * grid_step) - math.cos(th))
+                th += w * grid_step
+                v = v_next
+                rows.append((x, y, th, v, w))
+        self._rows = rows
+
+    @property
+    def duration(self) -> float:
+        return (len(self._rows) - 1) * self.step
+
+    def state(self, t: float) -> PersonState:
+        s = max(t, 0.0) / self.step
+        i = min(int(s), len(self._rows) - 2)
+        frac = min(s - i, 1.0)
+        a, b = self._rows[i], self._rows[i + 1]
+        if s >= len(self._rows) - 1:
+            x, y, th, _, _ = self._rows[-1]
+            return PersonState(x, y, math.remainder(th, 2.0 * math.pi), 0.0, 0.0)
+        x, y, th, v = (a[j] + frac * (b[j] - a[j]) for j in range(4))
+        return PersonState(x, y, math.remainder(th, 2.0 * math.pi), v, b[4])

@@ -38,6 +38,7 @@ from scipy.interpolate import make_smoothing_spline
 from companion.control.base import PersonState
 from companion.errors import DataError
 from companion.kinematics import wrap_pi
+from companion.sim.faults import Fault
 
 #: Column names a person CSV must have, in this order.
 CSV_COLUMNS = ("t", "x", "y")
@@ -324,3 +325,12 @@ def parse_number(where: str, col: str, cell: str) -> float:
     if not math.isfinite(value):
         raise DataError(f"{where}: column '{col}': expected a finite number, got {text!r}")
     return value
+
+
+def gap_faults(person: RecordedPerson, timeout: float) -> tuple[Fault, ...]:
+    """The gaps between samples longer than ``timeout`` (s) as ``person_dropout`` faults: the
+    person was not observed there, so the controller must not see an interpolation across
+    them (docs/safety.md, fault 1). Times are relative to the first sample."""
+    t = person.samples_t
+    gaps = np.flatnonzero(np.diff(t) > timeout)
+    return tuple(Fault("person_dropout", float(t[i]), float(t[i + 1])) for i in gaps)

@@ -31,6 +31,11 @@ Example::
     start = [0.0, 1.0]
     end = [10.0, 1.0]
 
+    [[faults]]               # any number (companion.sim.faults): what goes wrong, when
+    kind = "person_dropout"
+    start = 12.0
+    end = 13.5
+
 ``obstacle_source`` (top level) is "truth" (the controller knows the obstacles exactly) or
 "lidar" (it sees what the simulated LiDAR detects).
 """
@@ -54,7 +59,8 @@ from companion.control import make_controller
 from companion.sim.episode import Log, run_episode
 from companion.sim.sensing import make_perception
 from companion.sim.person import Figure8, PersonMotion, Segment, SegmentPath, circle, line, u_shape
-from companion.sim.recorded import load_person_csv
+from companion.sim.faults import Fault, faults_from_list
+from companion.sim.recorded import RecordedPerson, gap_faults, load_person_csv
 
 Triple = tuple[float, float, float]
 
@@ -201,11 +207,12 @@ class Scenario:
     source: str
     obstacles: tuple[Obstacle, ...] = ()
     obstacle_source: str = "truth"
+    faults: tuple[Fault, ...] = ()
 
 
 OBSTACLE_SOURCES = ("truth", "lidar")
 TOP_KEYS = ("name", "description", "duration", "seed", "controller", "obstacle_source",
-            "person", "robot", "obstacles", "params")
+            "person", "robot", "obstacles", "params", "faults")
 
 
 def _resolve_auto_side(params_map: dict, start: Pose | None, person: PersonMotion,
@@ -277,8 +284,11 @@ def scenario_from_mapping(data: Mapping[str, Any], source: str, base_dir: Path,
     if obstacle_source not in OBSTACLE_SOURCES:
         raise ConfigError(f"{where}obstacle_source: expected 'truth' or 'lidar', "
                           f"got {obstacle_source!r}")
+    faults = faults_from_list(data.get("faults", []), f"{where}faults")
+    if isinstance(person, RecordedPerson):   # gaps in a recording are outages (fault 1)
+        faults += gap_faults(person, params.supervisor.person_timeout)
     return Scenario(name, description, float(duration), seed, controller, person, start,
-                    params, source, obstacles, obstacle_source)
+                    params, source, obstacles, obstacle_source, faults)
 
 
 def builtin_names() -> list[str]:
@@ -313,4 +323,4 @@ def run_scenario(sc: Scenario, controller: str | None = None,
     return run_episode(make_controller(controller or sc.controller, params), sc.person, params,
                        sc.duration, start=sc.start, seed=sc.seed, obstacles=sc.obstacles,
                        perception=make_perception(obstacle_source or sc.obstacle_source,
-                                                  params))
+                                                  params), faults=sc.faults)

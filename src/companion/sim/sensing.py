@@ -28,6 +28,9 @@ class Perception(Protocol):
                   rng: np.random.Generator) -> tuple[Obstacle, ...]:
         """Obstacles known at control step ``step``."""
 
+    def scan(self) -> Scan | None:
+        """The latest LiDAR scan (None without a LiDAR)."""
+
 
 class GroundTruth:
     """The controller knows the world's obstacles exactly."""
@@ -39,6 +42,9 @@ class GroundTruth:
                   person_true: tuple[float, float], person_seen: tuple[float, float],
                   rng: np.random.Generator) -> tuple[Obstacle, ...]:
         return tuple(world)
+
+    def scan(self) -> Scan | None:
+        return None
 
 
 class LidarPerception:
@@ -66,6 +72,9 @@ class LidarPerception:
             self.last_scan = scan
             self.held = tuple(extract_obstacles(scan, person_seen, self.params.extractor))
         return self.held
+
+    def scan(self) -> Scan | None:
+        return self.last_scan
 
 
 def make_perception(source: str, params: Params) -> Perception:

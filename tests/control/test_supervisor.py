@@ -1,0 +1,365 @@
+"""The safety supervisor: one named test per fault of docs/safety.md, plus its building blocks.
+
+Every closed-loop test also checks the supervisor's guarantee (:func:`assert_within_limits`):
+finite commands within the velocity and acceleration limits.
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from companion.control import (Command, Observation, PersonState, Pose, SafetySupervisor,
+                               make_controller)
+from companion.kinematics import unicycle_step
+from companion.control.supervisor import (braking_speed, limit_rate, obstacle_clearances,
+                                          predict)
+from companion.obstacles import Circle, Wall
+from companion.params import Params
+from companion.perception import Scan
+from companion.sim.episode import run_episode
+from companion.sim.faults import Fault
+from companion.sim.person import Move, ScriptedWalk, line
+from companion.sim.sensing import make_perception
+
+P = Params()
+S = P.supervisor
+DT = P.dt
+EPS = 1e-9
+
+
+def assert_within_limits(log, p=P):
+    v, w = log["v"], log["omega"]
+    assert np.all(np.isfinite(v)) and np.all(np.isfinite(w))
+    assert np.all(np.abs(v) <= p.robot.v_max + EPS)
+    assert np.all(np.abs(w) <= p.robot.omega_max + EPS)
+    dv, dw = np.diff(v), np.diff(w)
+    assert np.all(np.abs(dv) <= max(p.supervisor.accel_max, p.supervisor.decel_max) * p.dt
+                  + EPS)
+    assert np.all(np.abs(dw) <= p.supervisor.angular_accel_max * p.dt + EPS)
+    # |v| shrinks at most at decel_max and grows at most at accel_max
+    shrink = np.abs(v[1:]) < np.abs(v[:-1])
+    assert np.all(np.abs(dv[~shrink]) <= p.supervisor.accel_max * p.dt + EPS)
+
+
+def person_distance(log):
+    return np.hypot(log["robot_x"] - log["person_x"], log["robot_y"] - log["person_y"])
+
+
+def walk(duration=30.0):
+    return line((0.0, 0.0, 0.0), 1.0), duration
+
+
+def run(faults=(), name="lqr", person=None, duration=20.0, p=P, **kw):
+    person = person or line((0.0, 0.0, 0.0), 1.0)
+    return run_episode(make_controller(name, p), person, p, duration, faults=faults, **kw)
+
+
+def rows(log, reason):
+    return np.array([reason in r.split("+") for r in log["reason"]])
+
+
+# -- building blocks -------------------------------------------------------------------------
+
+def test_limit_rate_grows_and_shrinks_at_their_own_rates():
+    assert limit_rate(5.0, 1.0, 2.0, 4.0, 0.1) == pytest.approx(1.2)      # grow at 2
+    assert limit_rate(-5.0, 1.0, 2.0, 4.0, 0.1) == pytest.approx(0.6)     # shrink at 4
+    assert limit_rate(-5.0, 0.2, 2.0, 4.0, 0.1) == pytest.approx(-0.1)    # 0.05 s to 0, then grow
+    assert limit_rate(-5.0, -1.0, 2.0, 4.0, 0.1) == pytest.approx(-1.2)   # mirrored
+    assert limit_rate(0.3, 0.25, 2.0, 4.0, 0.1) == 0.3                    # reachable: exact
+
+
+@pytest.mark.parametrize("gap", [0.01, 0.3, 1.0, 5.0])
+def test_braking_speed_stops_exactly_within_the_gap(gap):
+    a, dt = 2.5, 0.05
+    v = braking_speed(gap, a, dt)
+    assert v * dt + v * v / (2 * a) == pytest.approx(gap)
+    assert braking_speed(0.0, a, dt) == 0.0 and braking_speed(-1.0, a, dt) == 0.0
+
+
+def test_predict_follows_the_unicycle_arc():
+    h = PersonState(0.0, 0.0, 0.0, 1.0, 0.5)
+    q = predict(h, math.pi / 0.5)            # half a circle of radius 2
+    assert (q.x, q.y) == pytest.approx((0.0, 4.0), abs=1e-9)
+    assert predict(PersonState(1.0, 2.0, 0.0, 1.0, 0.0), 2.0).x == pytest.approx(3.0)
+
+
+def test_obstacle_clearances_for_circles_and_walls():
+    x, y = np.array([0.0, 3.0]), np.array([0.0, 0.0])
+    got = obstacle_clearances(x, y, [Circle(1.0, 0.0, 0.5), Wall(3.0, 1.0, 5.0, 1.0)], 0.25)
+    assert got == pytest.approx([0.25, 0.75])
+
+
+def test_started_in_the_slot_it_is_ok_throughout():
+    log = run()
+    assert set(log["status"]) == {"ok"}
+    assert_within_limits(log)
+
+
+# -- fault 1: person missing or stale ------------------------------------------------------
+
+def test_fault1_person_lost_brakes_to_a_stop_and_holds():
+    start, end = 5.0, 12.0
+    log = run([Fault("person_dropout", start, end)], duration=20.0)
+    t = log["t"]
+    coasting = (t >= start) & (t <= start + S.person_timeout - DT)
+    assert set(log["status"][coasting]) == {"degraded"}
+    assert np.all(rows(log, "person_missing")[coasting])
+    lost = (t > start + S.person_timeout + EPS) & (t < end)
+    assert set(log["status"][lost]) == {"stopped"}
+    assert np.all(rows(log, "person_lost")[lost])
+    v = log["v"][lost]
+    # brakes at the deceleration limit (to within one period) and then holds zero
+    brake_steps = int(math.ceil(abs(v[0]) / (S.decel_max * DT))) + 1
+    assert np.all(np.diff(np.abs(v)) <= EPS)
+    assert np.all(v[brake_steps:] == 0.0) and np.all(log["omega"][lost][brake_steps:] == 0.0)
+    # never drives on towards the last known point: it stops within its braking distance
+    i0 = np.flatnonzero(lost)[0]
+    travel = math.hypot(log["robot_x"][lost][-1] - log["robot_x"][i0],
+                        log["robot_y"][lost][-1] - log["robot_y"][i0])
+    assert travel <= v[0] ** 2 / (2 * S.decel_max) + abs(v[0]) * DT + 1e-6
+    assert_within_limits(log)
+
+
+def test_fault1_short_gap_is_bridged_by_prediction():
+    log = run([Fault("person_dropout", 5.0, 5.3)], duration=10.0)
+    assert "stopped" not in set(log["status"])
+    assert np.max(np.abs(log["rho"] - log["rho_d"])) < 0.01   # constant-velocity prediction
+
+
+# -- fault 2: NaN or Inf in any input ------------------------------------------------------
+
+@pytest.mark.parametrize("kind, status, reason", [
+    ("person_nan", "degraded", "person_invalid"),
+    ("robot_nan", "stopped", "robot_pose_invalid"),
+    ("obstacle_nan", "degraded", "obstacle_invalid"),
+])
+def test_fault2_non_finite_inputs_are_treated_as_missing(kind, status, reason):
+    log = run([Fault(kind, 5.0, 5.4)], duration=12.0)
+    during = (log["t"] >= 5.0) & (log["t"] < 5.4)
+    assert set(log["status"][during]) == {status}
+    assert np.all(rows(log, reason)[during])
+    assert_within_limits(log)
+    assert np.all(np.isfinite(log["robot_x"]))
+    assert set(log["status"][log["t"] > 9.0]) == {"ok"}   # and it recovers
+
+
+def test_fault2_inf_in_the_person_and_obstacles_is_never_propagated():
+    sup = make_controller("lqr", P)
+    sup.reset()
+    bad = [PersonState(math.inf, 0.0, 0.0, 1.0, 0.0), PersonState(0.0, 1.0, -math.inf, 1.0, 0.0),
+           PersonState(0.0, 1.0, 0.0, math.nan, 0.0)]
+    good = PersonState(0.25, 1.0, 0.0, 1.0, 0.0)
+    for k in range(40):
+        h = bad[k % 3] if 10 <= k < 16 else good
+        obs = Observation(k * DT, Pose(0.0, 0.0, 0.0), h,
+                          (Circle(math.inf, 0.0, 1.0), Wall(0.0, math.nan, 1.0, 1.0)))
+        cmd = sup.step(obs)
+        assert math.isfinite(cmd.v) and math.isfinite(cmd.omega)
+        assert "obstacle_invalid" in cmd.reason
+        if 10 <= k < 16:
+            assert "person_invalid" in cmd.reason
+
+
+# -- fault 3: identity switch ----------------------------------------------------------------
+
+def test_fault3_person_jump_is_rejected_as_an_outlier():
+    log = run([Fault("person_jump", 5.0, 5.3, dx=0.0, dy=2.0)], duration=10.0)
+    during = (log["t"] >= 5.0) & (log["t"] < 5.3)
+    assert np.all(rows(log, "person_outlier")[during])
+    assert np.max(np.abs(log["rho"] - log["rho_d"])) < 0.01   # it did not chase the jump
+    assert_within_limits(log)
+
+
+def test_fault3_persistent_switch_stops_then_reacquires():
+    log = run([Fault("person_jump", 5.0, 30.0, dx=3.0, dy=-3.0)], duration=14.0)
+    t = log["t"]
+    assert set(log["status"][(t > 5.0 + S.person_timeout + EPS) & (t < 5.0 + S.person_timeout
+                                                                     + S.reacquire_time)]) \
+        == {"stopped"}
+    assert "reacquiring" in "+".join(log["reason"])
+    assert set(log["status"][t > 12.0]) <= {"ok", "degraded"}   # follows the new track
+    assert_within_limits(log)
+
+
+# -- fault 4: bad time steps ------------------------------------------------------------------
+
+class Spy:
+    """A controller that records resets and steps and always asks for full speed."""
+
+    def __init__(self):
+        self.resets, self.times = 0, []
+
+    def reset(self):
+        self.resets += 1
+
+    def step(self, obs):
+        self.times.append(obs.t)
+        return Command(1.5, 1.0)
+
+    def applied(self, cmd):
+        pass
+
+
+@pytest.mark.parametrize("bad_t", [0.5, 0.4, math.nan, math.inf])   # zero, negative, not finite
+def test_fault4_zero_negative_or_nan_step_holds_and_resets(bad_t):
+    spy = Spy()
+    sup = SafetySupervisor(spy, P)
+    h = PersonState(-3.0, 0.0, 0.0, 0.0, 0.0)   # standing well behind: no keep-out effect
+    times = [0.0, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45, 0.5, bad_t, 0.55]
+    cmds = [sup.step(Observation(t, Pose(0.0, 0.0, 0.0), h)) for t in times[:11]]
+    resets = spy.resets
+    held = sup.step(Observation(bad_t, Pose(0.0, 0.0, 0.0), h))
+    assert (held.v, held.omega) == (cmds[-1].v, cmds[-1].omega)
+    assert held.status == "degraded" and "clock" in held.reason.split("+")
+    nxt = sup.step(Observation(0.55, Pose(0.0, 0.0, 0.0), h))
+    assert spy.resets == resets + 1          # filters reset before the next step
+    assert all(b > a for a, b in zip(spy.times, spy.times[1:]))   # time handed on advances
+    assert abs(nxt.v - held.v) <= S.accel_max * DT + EPS
+
+
+def test_fault4_long_step_resets_filters_without_a_jump():
+    spy = Spy()
+    sup = SafetySupervisor(spy, P)
+    h = PersonState(-3.0, 0.0, 0.0, 0.0, 0.0)
+    a = sup.step(Observation(0.0, Pose(0.0, 0.0, 0.0), h))
+    resets = spy.resets
+    b = sup.step(Observation(10.0, Pose(0.0, 0.0, 0.0), h))   # 200 periods late
+    assert spy.resets == resets + 1 and "clock_gap" in b.reason
+    assert abs(b.v - a.v) <= S.accel_max * DT + EPS          # no huge integration
+
+
+@pytest.mark.parametrize("kind", ["clock_freeze", "clock_backward", "stall"])
+def test_fault4_clock_faults_in_closed_loop(kind):
+    log = run([Fault(kind, 5.0, 5.5)], duration=12.0)
+    assert_within_limits(log)
+    assert np.max(np.abs(log["rho"] - log["rho_d"])[log["t"] > 9.0]) < 0.02
+
+
+# -- fault 5: rho near zero, person inside the protective distance ---------------------------
+
+@pytest.mark.parametrize("name", ["lqr", "pid", "vsm", "ic"])
+@pytest.mark.parametrize("where", [(0.25, 0.0), (0.3, 0.1), (-0.3, 0.0), (0.0, 0.35)])
+def test_fault5_inside_the_protective_distance_no_motion_towards_the_person(name, where):
+    """The person stands at R (rho = 0) or within 0.5 m of the robot centre, in any direction;
+    for 2 s the robot may rotate or back off but never move towards the person."""
+    sup = make_controller(name, P)
+    sup.reset()
+    h = PersonState(where[0], where[1], 0.3, 0.0, 0.0)
+    pose = Pose(0.0, 0.0, 0.0)
+    start = math.hypot(h.x, h.y)
+    for k in range(40):
+        cmd = sup.step(Observation(k * DT, pose, h))
+        assert math.isfinite(cmd.v) and math.isfinite(cmd.omega)
+        nx, ny = pose.x - h.x, pose.y - h.y
+        if math.hypot(nx, ny) < S.protective_distance:
+            assert "protective_zone" in cmd.reason
+            assert cmd.v * (math.cos(pose.theta) * nx + math.sin(pose.theta) * ny) >= -EPS
+        pose = Pose(*unicycle_step(pose.x, pose.y, pose.theta, cmd.v, cmd.omega, DT))
+        assert math.hypot(pose.x - h.x, pose.y - h.y) >= start - 1e-9   # never closer
+
+
+# -- fault 6: the person stops abruptly or walks towards the robot ----------------------------
+
+def _behind(p=P):
+    return dataclasses.replace(p, formation=dataclasses.replace(p.formation, bearing=math.pi))
+
+
+FAULT6 = {
+    # behind the person, who stops dead (the walker's 1.5 m/s^2 limit is lifted to 20)
+    "stops_abruptly": (_behind(), [Move(6.0, 1.2), Move(6.0, 0.0)], 20.0),
+    # behind the person, who stops, turns round on the spot and walks back at the robot
+    "turns_around": (_behind(), [Move(6.0, 1.0), Move(1.0, 0.0), Move(1.0, 0.0, math.pi),
+                                 Move(6.0, 1.0)], 3.0),
+    # beside (left), the person turns left towards the robot and walks into it
+    "walks_into_robot": (P, [Move(6.0, 1.0), Move(0.5, 0.6, math.pi), Move(6.0, 1.0)], 1.5),
+}
+
+
+@pytest.mark.parametrize("name", ["lqr", "pid", "vsm", "ic"])
+@pytest.mark.parametrize("case", sorted(FAULT6))
+def test_fault6_no_overshoot_into_the_protective_distance(case, name):
+    p, moves, accel = FAULT6[case]
+    person = ScriptedWalk((0.0, 0.0, 0.0), moves, accel=accel)
+    log = run_episode(make_controller(name, p), person, p, person.duration + 3.0)
+    assert np.min(person_distance(log)) >= p.supervisor.protective_distance
+    assert_within_limits(log, p)
+
+
+# -- fault 7: obstacle inside the footprint, invalid scans ----------------------------------
+
+def test_fault7_obstacle_inside_the_footprint_stops():
+    sup = make_controller("lqr", P)
+    sup.reset()
+    h = PersonState(0.25, 1.0, 0.0, 1.0, 0.0)
+    cmds = [sup.step(Observation(k * DT, Pose(0.0, 0.0, 0.0), h, (Circle(0.3, 0.0, 0.1),)))
+            for k in range(30)]
+    assert {c.status for c in cmds} == {"stopped"}
+    assert all(c.reason == "obstacle_in_footprint" for c in cmds)
+    assert cmds[-1].v == 0.0 and cmds[-1].omega == 0.0
+
+
+def _scan(ranges):
+    ranges = np.asarray(ranges, dtype=float)
+    return Scan(np.linspace(-math.pi, math.pi, ranges.size, endpoint=False), ranges, 0.0, 0.0,
+                0.0)
+
+
+@pytest.mark.parametrize("ranges, status, reason", [
+    ([math.nan] * 360, "stopped", "scan_invalid"),
+    ([math.nan] * 200 + [math.inf] * 160, "stopped", "scan_invalid"),   # < half valid
+    ([math.nan] * 100 + [math.inf] * 260, "degraded", "scan_partial"),
+    ([math.inf] * 359 + [-math.inf], "stopped", "obstacle_in_footprint"),   # REP 117 too close
+    ([math.inf] * 359 + [0.1], "stopped", "obstacle_in_footprint"),
+])
+def test_fault7_invalid_returns_are_not_free_space(ranges, status, reason):
+    sup = make_controller("lqr", P)
+    sup.reset()
+    h = PersonState(0.25, 1.0, 0.0, 1.0, 0.0)
+    cmd = sup.step(Observation(0.0, Pose(0.0, 0.0, 0.0), h, (), _scan(ranges)))
+    assert cmd.status == status and reason in cmd.reason.split("+")
+
+
+def test_fault7_scan_blackout_in_closed_loop_with_lidar():
+    p = P
+    log = run_episode(make_controller("lqr", p), line((0.0, 0.0, 0.0), 1.0), p, 10.0,
+                      obstacles=(Circle(30.0, 5.0, 0.3),), perception=make_perception("lidar", p),
+                      faults=[Fault("scan_blackout", 3.0, 6.0)])
+    during = (log["t"] >= 3.0) & (log["t"] < 6.0)
+    assert set(log["status"][during]) == {"stopped"}
+    assert np.all(rows(log, "scan_invalid")[during])
+    assert_within_limits(log)
+
+
+# -- fault 8: resume after an outage ---------------------------------------------------------
+
+@pytest.mark.parametrize("name", ["lqr", "pid", "vsm", "ic"])
+def test_fault8_resume_after_outage_without_a_jump(name):
+    log = run([Fault("person_dropout", 5.0, 8.0)], name=name, duration=25.0)
+    t = log["t"]
+    assert set(log["status"][(t > 5.6) & (t < 8.0)]) == {"stopped"}
+    resumed = np.flatnonzero((t >= 8.0) & (log["status"] != "stopped"))[0]
+    assert t[resumed] <= 8.0 + S.reacquire_time + 2 * DT
+    assert_within_limits(log)                   # the ramp back up obeys the limits
+    late = t > 22.0
+    assert np.max(np.abs(log["rho"] - log["rho_d"])[late]) < 0.05   # and it catches up
+
+
+# -- recorded person CSVs: gaps are outages -------------------------------------------------
+
+def test_recorded_gap_longer_than_the_timeout_is_an_outage(tmp_path):
+    from companion.sim.recorded import gap_faults, load_person_csv
+    f = tmp_path / "walk.csv"
+    times = [i * 0.1 for i in range(50)] + [8.0 + i * 0.1 for i in range(50)]   # 3.1 s gap
+    f.write_text("t,x,y\n" + "".join(f"{t:.2f},{t:.3f},0\n" for t in times))
+    person = load_person_csv(f)
+    faults = gap_faults(person, S.person_timeout)
+    assert [(f.kind, f.start, f.end) for f in faults] == [
+        ("person_dropout", pytest.approx(4.9), pytest.approx(8.0))]
+    log = run_episode(make_controller("lqr", P), person, P, person.duration, faults=faults)
+    gap = (log["t"] > 4.9 + S.person_timeout + EPS) & (log["t"] < 8.0)
+    assert set(log["status"][gap]) == {"stopped"}
+    assert_within_limits(log)
+    short = gap_faults(person, 5.0)
+    assert short == ()
