@@ -28,7 +28,7 @@ from companion.io import save_figure, write_csv, write_json
 from companion.model import SIDES
 from companion.params import Params, params_from_mapping
 from companion.config import load_toml
-from companion.sim import convergence
+from companion.sim import convergence, soak
 from companion.sim.episode import LOG_COLUMNS, TEXT_COLUMNS, Log
 from companion.sim.recorded import load_person_csv
 from companion.sim.scenario import Scenario, builtin_names, load_scenario, run_scenario
@@ -254,6 +254,28 @@ def cmd_pedestrians(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_soak(args: argparse.Namespace) -> int:
+    params = params_arg(args)
+    duration = _positive(args.duration, "--duration")
+    print(f"soak: {duration:g} s of a random walker among pillars (seed {args.seed}), "
+          f"controller {args.controller}; about {duration / 25:.0f} s")
+    summary, log = soak.run_soak(duration, args.seed, args.controller, params)
+    out = output_dir(Path(args.out or Path("out") / "soak"))
+    write_json(out / "soak.json", summary)
+    written = ["soak.json"]
+    if args.log:
+        write_log(out / "log.csv", log)
+        written.append("log.csv")
+    for key, value in summary.items():
+        print(f"  {key:26s} {value:.4g}" if isinstance(value, float) else f"  {key:26s} {value}")
+    ok = summary["finite"] and summary["person_collisions"] == 0 \
+        and summary["obstacle_collisions"] == 0
+    print("PASS: no collision with the person or an obstacle, all values finite" if ok
+          else "FAIL: a collision or a non-finite value")
+    print(f"wrote {', '.join(written)} in {out}")
+    return 0 if ok else 1
+
+
 class OneLineParser(argparse.ArgumentParser):
     """argparse, but usage errors are one line on stderr (exit code 2)."""
 
@@ -357,6 +379,17 @@ def parser() -> argparse.ArgumentParser:
     pd.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
     pd.add_argument("--out", metavar="DIR", help="output folder (default out/pedestrians)")
     pd.set_defaults(func=cmd_pedestrians)
+
+    sk = sub.add_parser("soak", help="long run of a random walker among obstacles "
+                        "(docs/safety.md); exit 1 on a collision or a non-finite value")
+    sk.add_argument("--duration", default="3600", metavar="S",
+                    help="simulated time in s (default 3600)")
+    sk.add_argument("--seed", type=int, default=0, help="world and walk seed (default 0)")
+    sk.add_argument("--controller", default="lqr", choices=sorted(CONTROLLERS))
+    sk.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
+    sk.add_argument("--log", action="store_true", help="also write log.csv")
+    sk.add_argument("--out", metavar="DIR", help="output folder (default out/soak)")
+    sk.set_defaults(func=cmd_soak)
     return ap
 
 

@@ -145,6 +145,19 @@ def obstacle_clearances(x: np.ndarray, y: np.ndarray, obstacles: Sequence[Obstac
     return out
 
 
+#: Speed (m/s) up to which a person is assumed to be able to speed up (brisk walking).
+BRISK_WALK = 1.5
+
+
+def speed_up_distance(v: float, accel: float, t: float) -> float:
+    """Extra distance (m) a person walking at ``v`` covers in ``t`` s by speeding up at
+    ``accel`` until :data:`BRISK_WALK` (none if already faster)."""
+    if accel <= 0.0 or v >= BRISK_WALK:
+        return 0.0
+    t_up = min(t, (BRISK_WALK - v) / accel)
+    return 0.5 * accel * t_up * t_up + accel * t_up * (t - t_up)
+
+
 def rollout_margins(robot: Pose, current: tuple[float, float], targets: np.ndarray,
                     person: PersonState, obstacles: Sequence[Obstacle], params: Params,
                     horizon: float = 1.2, step: float = 0.1) -> np.ndarray:
@@ -152,7 +165,8 @@ def rollout_margins(robot: Pose, current: tuple[float, float], targets: np.ndarr
 
     The robot's velocity ramps from ``current`` to the target at the acceleration limits and
     the unicycle is integrated over ``horizon`` s; the person moves at constant speed and
-    turn rate (:func:`predict`). The margin is the smallest, over the horizon, of the
+    turn rate (:func:`predict`) plus the distance it could gain by speeding up at
+    ``person_accel`` along its heading (:func:`speed_up_distance`). The margin is the smallest, over the horizon, of the
     distance to the person minus ``protective_distance`` and the clearance to the obstacles.
     """
     s = params.supervisor
@@ -169,7 +183,9 @@ def rollout_margins(robot: Pose, current: tuple[float, float], targets: np.ndarr
         y = y + step * v * np.sin(th + 0.5 * step * w)
         th = th + step * w
         h = predict(person, t)
-        margin = np.minimum(margin, np.hypot(x - h.x, y - h.y) - s.protective_distance)
+        extra = speed_up_distance(person.v, s.person_accel, t)
+        hx, hy = h.x + extra * math.cos(person.theta), h.y + extra * math.sin(person.theta)
+        margin = np.minimum(margin, np.hypot(x - hx, y - hy) - s.protective_distance)
         margin = np.minimum(margin, obstacle_clearances(x, y, obstacles, params.robot.radius))
     return margin
 

@@ -165,6 +165,30 @@ class Move:
     turn_rate: float = 0.0
 
 
+Row = tuple[float, float, float, float, float]   # x, y, theta (unwrapped), v, omega
+
+
+def integrate_move(row: Row, move: Move, accel: float, grid_step: float) -> list[Row]:
+    """The walker's states every ``grid_step`` s through ``move``, starting from ``row``
+    (exact unicycle arcs, speed ramping towards ``move.speed`` at ``accel``)."""
+    x, y, th, v, _ = row
+    w = move.turn_rate
+    out = []
+    for _ in range(max(1, int(round(move.duration / grid_step)))):
+        v_next = min(max(move.speed, v - accel * grid_step), v + accel * grid_step)
+        s = 0.5 * (v + v_next) * grid_step
+        if abs(w * grid_step) < 1e-12:
+            x, y = x + s * math.cos(th), y + s * math.sin(th)
+        else:
+            r = s / (w * grid_step)
+            x += r * (math.sin(th + w * grid_step) - math.sin(th))
+            y -= r * (math.cos(th + w * grid_step) - math.cos(th))
+        th += w * grid_step
+        v = v_next
+        out.append((x, y, th, v, w))
+    return out
+
+
 class ScriptedWalk:
     """A person walking a script of :class:`Move` phases: stop-and-go, turns on the spot,
     turnarounds. The unicycle is integrated exactly on a ``grid_step`` grid with the speed
@@ -181,23 +205,9 @@ class ScriptedWalk:
                                  "a finite turn rate")
         self.moves = tuple(moves)
         self.step = grid_step
-        x, y, th = start
-        v = 0.0
-        rows = [(x, y, th, v, 0.0)]
+        rows = [(start[0], start[1], start[2], 0.0, 0.0)]
         for m in self.moves:
-            for _ in range(max(1, int(round(m.duration / grid_step)))):
-                v_next = min(max(m.speed, v - accel * grid_step), v + accel * grid_step)
-                s = 0.5 * (v + v_next) * grid_step
-                w = m.turn_rate
-                if abs(w * grid_step) < 1e-12:
-                    x, y = x + s * math.cos(th), y + s * math.sin(th)
-                else:
-                    r = s / (w * grid_step)
-                    x += r * (math.sin(th + w * grid_step) - math.sin(th))
-                    y -= r * (math.cos(th + w * grid_step) - math.cos(th))
-                th += w * grid_step
-                v = v_next
-                rows.append((x, y, th, v, w))
+            rows += integrate_move(rows[-1], m, accel, grid_step)
         self._rows = rows
 
     @property
