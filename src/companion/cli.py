@@ -120,6 +120,8 @@ def summary_lines(m: dict) -> list[str]:
         f"({m['rmsv_omega_radps'] * 1000:.2f} mrad/s)",
         f"  min distance robot centre to person {m['min_person_distance_m']:.3f} m",
         f"  settling time {'never' if settle is None else f'{settle:.2f} s'}",
+        f"  supervisor: ok {m['share_ok']:.1%}, degraded {m['share_degraded']:.1%}, "
+        f"stopped {m['share_stopped']:.1%} of the time (reasons in log.csv)",
     ] + ([] if m.get("min_obstacle_clearance_m") is None else [
         f"  min obstacle clearance {m['min_obstacle_clearance_m']:.3f} m, "
         f"collisions {m['obstacle_collisions']}"])

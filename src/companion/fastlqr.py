@@ -9,10 +9,10 @@ The same computation as :meth:`companion.control.lqr.LqrController.gain`, i.e.
 5. stabilising solution ``P`` of the discrete algebraic Riccati equation and
    ``K = (R + B'PB)^-1 B'PA`` (:func:`companion.lqr.dlqr`),
 
-in a few microseconds instead of ~0.7 ms, for small dense matrices and without any Python
+in ~10 microseconds instead of ~0.7 ms, for small dense matrices and without any Python
 object in the hot path. The Riccati equation is solved with the structure-preserving
-doubling algorithm (SDA); the zero-order hold uses the scaling-and-squaring Padé(13) matrix
-exponential. The compiled functions never raise on bad numbers: they report failure with a
+doubling algorithm (SDA) polished by a Newton step; the zero-order hold uses the
+scaling-and-squaring Padé(13) matrix exponential. The compiled functions never raise on bad numbers: they report failure with a
 flag, and :func:`lqr_gain` turns it into ``numpy.linalg.LinAlgError`` like ``dlqr``.
 
 All compiled functions use ``error_model="numpy"``: a division by zero gives inf/nan (then
@@ -30,6 +30,15 @@ from numba import njit
 DARE_TOL = 1e-14
 #: SDA iteration cap: each iteration doubles the horizon; convergent cases need < 40.
 DARE_MAX_ITER = 100
+#: Smith doubling in a Newton step stops when its update is below this times the correction
+#: (the correction itself is normally ~1e-11 of P or less, so this is ample).
+NEWTON_TOL = 1e-3
+#: Newton steps stop when the correction is below this times P (after one step, normally) ...
+NEWTON_DONE = 1e-12
+#: ... or stops shrinking, or after this many steps ...
+NEWTON_MAX_STEPS = 6
+#: ... and the solution is accepted if the last correction is below this times P.
+NEWTON_RELIABLE = 1e-6
 #: Same stability margin as :func:`companion.lqr.dlqr`: closed-loop spectral radius < 1 - 1e-9.
 RADIUS_MARGIN = 1e-9
 
@@ -127,11 +136,11 @@ def _lu_solve(lu, piv, b, n, m):
 
 
 @njit(**_JIT)
-def _copy(src, dst, n, m, scale=1.0):
-    """``dst[:n, :m] = scale * src[:n, :m]``."""
+def _copy(src, dst, n, m):
+    """``dst[:n, :m] = src[:n, :m]``."""
     for i in range(n):
         for j in range(m):
-            dst[i, j] = scale * src[i, j]
+            dst[i, j] = src[i, j]
 
 
 @njit(**_JIT)
@@ -224,7 +233,12 @@ def expm_nb(x):
     ndarray, shape (n, n)
         ``exp(x)``; all nan if ``x`` has a non-finite entry.
     """
-    n = x.shape[0]
+    return _expm(x, x.shape[0])
+
+
+@njit(**_JIT)
+def _expm(x, n):
+    """Body of :func:`expm_nb` for an (n, n) ``x``."""
     nrm = _norm_inf(x.T, n, n)  # 1-norm of x
     if not nrm < np.inf:
         return np.full((n, n), np.nan)
@@ -300,20 +314,34 @@ def discretize_nb(jx, ju, dt, zoh):
     b : ndarray, shape (n, m)
     """
     n, m = ju.shape
+    return _discretize(jx, ju, dt, zoh, n, m, n + m)
+
+
+@njit(**_JIT)
+def _discretize(jx, ju, dt, zoh, n, m, nm):
+    """Body of :func:`discretize_nb` for (n, n) ``jx`` and (n, m) ``ju``; ``nm = n + m``."""
     a = np.empty((n, n))
     b = np.empty((n, m))
     if zoh:
-        block = np.zeros((n + m, n + m))
-        _copy(jx, block, n, n, dt)
-        _copy(ju, block[:, n:], n, m, dt)
-        e = expm_nb(block)
-        _copy(e, a, n, n)
-        _copy(e[:, n:], b, n, m)
-    else:
-        _copy(jx, a, n, n, dt)
+        block = np.zeros((nm, nm))
         for i in range(n):
+            for j in range(n):
+                block[i, j] = dt * jx[i, j]
+            for j in range(m):
+                block[i, n + j] = dt * ju[i, j]
+        e = _expm(block, nm)
+        for i in range(n):
+            for j in range(n):
+                a[i, j] = e[i, j]
+            for j in range(m):
+                b[i, j] = e[i, n + j]
+    else:
+        for i in range(n):
+            for j in range(n):
+                a[i, j] = dt * jx[i, j]
             a[i, i] += 1.0
-        _copy(ju, b, n, m, dt)
+            for j in range(m):
+                b[i, j] = dt * ju[i, j]
     return a, b
 
 
@@ -333,10 +361,12 @@ def augment_nb(a, b):
     """
     n, m = b.shape
     a_bar = np.zeros((n + m, n + m))
-    _copy(a, a_bar, n, n)
-    _copy(b, a_bar[:, n:], n, m)
     b_bar = np.zeros((n + m, m))
-    _copy(b, b_bar, n, m)
+    for i in range(n):
+        for j in range(n):
+            a_bar[i, j] = a[i, j]
+        for j in range(m):
+            a_bar[i, n + j] = b_bar[i, j] = b[i, j]
     for i in range(m):
         a_bar[n + i, n + i] = 1.0
         b_bar[n + i, i] = 1.0
@@ -351,13 +381,14 @@ def augment_nb(a, b):
 def _sda(a, b, q, r, p_out, n, m):
     """Body of :func:`solve_dare_nb` for an (n, n) ``a`` and (n, m) ``b``."""
     # G_0 = B R^-1 B', H_0 = Q (both symmetrised), A_0 = A.
-    r_lu = np.empty((m, m))
-    _copy(r, r_lu, m, m)
+    r_lu = r.copy()
     piv_m = np.empty(m, np.int64)
     if not _lu_factor(r_lu, piv_m, m):
         return False, 0
     rinv_bt = np.empty((m, n))
-    _copy(b.T, rinv_bt, m, n)
+    for i in range(m):
+        for j in range(n):
+            rinv_bt[i, j] = b[j, i]
     _lu_solve(r_lu, piv_m, rinv_bt, m, n)
     g = np.empty((n, n))
     _matmul(b, rinv_bt, g, n, m, n)
@@ -366,8 +397,7 @@ def _sda(a, b, q, r, p_out, n, m):
         for j in range(i, n):
             g[i, j] = g[j, i] = 0.5 * (g[i, j] + g[j, i])
             h[i, j] = h[j, i] = 0.5 * (q[i, j] + q[j, i])
-    ak = np.empty((n, n))
-    _copy(a, ak, n, n)
+    ak = a.copy()
     w = np.empty((n, n))
     piv = np.empty(n, np.int64)
     w_ia = np.empty((n, n))         # W_k^-1 A_k
@@ -405,8 +435,113 @@ def _sda(a, b, q, r, p_out, n, m):
         if not abs(total) < np.inf:
             return False, it
         if step <= DARE_TOL * size:
-            return True, it
+            return _polish(a, b, q, r, h, n, m), it
     return False, DARE_MAX_ITER
+
+
+@njit(**_JIT)
+def _polish(a, b, q, r, p, n, m):
+    """Newton steps on the SDA solution ``p`` (in place) until the correction is negligible.
+
+    Steps stop once the relative correction is below ``NEWTON_DONE`` or no longer shrinks by a
+    factor 10 (it has reached the rounding floor, ~1e-10..1e-8 of ``P`` next to the
+    stabilisability boundary), after at most ``NEWTON_MAX_STEPS``. Returns whether the last
+    correction is below ``NEWTON_RELIABLE``: if not, ``P`` is not determined to working
+    accuracy (the SDA iterate was far off and Newton does not settle), treated as failure.
+    """
+    last = np.inf
+    for _ in range(NEWTON_MAX_STEPS):
+        correction = _newton_step(a, b, q, r, p, n, m)
+        if not correction >= 0.0:
+            return False
+        if correction <= NEWTON_DONE or correction > 0.1 * last:
+            return correction <= NEWTON_RELIABLE
+        last = correction
+    return last <= NEWTON_RELIABLE
+
+
+@njit(**_JIT)
+def _gain(a, b, r, p, k_out, n, m):
+    """``k_out = (R + B'PB)^-1 B'PA``; False if ``R + B'PB`` is singular."""
+    bt_p = np.empty((m, n))
+    _matmul_tn(b, p, bt_p, m, n, n)
+    s = np.empty((m, m))
+    _matmul(bt_p, b, s, m, n, m)
+    for i in range(m):
+        for j in range(m):
+            s[i, j] += r[i, j]
+    _matmul(bt_p, a, k_out, m, n, n)
+    piv = np.empty(m, np.int64)
+    if not _lu_factor(s, piv, m):
+        return False
+    _lu_solve(s, piv, k_out, m, n)
+    return True
+
+
+@njit(**_JIT)
+def _closed_loop(a, b, k, out, n, m):
+    """``out = A - B K``."""
+    _matmul(b, k, out, n, m, n)
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = a[i, j] - out[i, j]
+
+
+@njit(**_JIT)
+def _newton_step(a, b, q, r, p, n, m):
+    """One Newton (Hewer) step on an approximate stabilising DARE solution ``p``, in place.
+
+    With ``K = K(P)`` and ``Ac = A - B K``, the correction ``D`` solves the Stein equation
+    ``D - Ac' D Ac = Q + K'RK + Ac' P Ac - P`` (the right-hand side is the Riccati residual of
+    ``P``), by Smith's doubling ``D <- D + M' D M``, ``M <- M^2`` from ``D = residual``,
+    ``M = Ac``, until the update is below ``NEWTON_TOL`` times ``D``; ``p`` becomes the Newton
+    iterate ``P + D``. Returns ``max|D| / max|P + D|``, or -1 if the Smith doubling does not
+    converge (closed loop not stable) or produces non-finite numbers.
+    """
+    k = np.empty((m, n))
+    if not _gain(a, b, r, p, k, n, m):
+        return -1.0
+    ac = np.empty((n, n))
+    _closed_loop(a, b, k, ac, n, m)
+    tmp = np.empty((n, n))
+    d = np.empty((n, n))
+    _matmul(p, ac, tmp, n, n, n)
+    _matmul_tn(ac, tmp, d, n, n, n)                 # Ac' P Ac
+    rk = np.empty((m, n))
+    _matmul(r, k, rk, m, m, n)
+    krk = np.empty((n, n))
+    _matmul_tn(k, rk, krk, n, m, n)                 # K' R K
+    for i in range(n):
+        for j in range(i, n):
+            x = 0.5 * ((q[i, j] + krk[i, j] + d[i, j]) + (q[j, i] + krk[j, i] + d[j, i]))
+            d[i, j] = d[j, i] = x - p[i, j]
+    mj = ac
+    mm = np.empty((n, n))
+    t = np.empty((n, n))
+    for _ in range(DARE_MAX_ITER):
+        _matmul(d, mj, tmp, n, n, n)
+        _matmul_tn(mj, tmp, t, n, n, n)             # M' D M
+        step = 0.0
+        size = 0.0
+        total = 0.0
+        for i in range(n):
+            for j in range(i, n):
+                x = 0.5 * (t[i, j] + t[j, i])
+                d[i, j] = d[j, i] = d[i, j] + x
+                step = max(step, abs(x))
+                size = max(size, abs(d[i, j]))
+                total += d[i, j]
+        if not abs(total) < np.inf:
+            return -1.0
+        if step <= NEWTON_TOL * size:
+            for i in range(n):
+                for j in range(n):
+                    p[i, j] += d[i, j]
+            scale = _max_abs(p, n, n)
+            return size / scale if scale > 0.0 else size
+        _matmul(mj, mj, mm, n, n, n)
+        mj, mm = mm, mj
+    return -1.0
 
 
 @njit(**_JIT)
@@ -429,6 +564,16 @@ def solve_dare_nb(a, b, q, r, p_out):
     stabilisability boundary (closed-loop spectral radius ``1 - eps``) about
     ``log2(37 / eps)``, e.g. ~35 for ``eps = 1e-9``.
 
+    The converged iterate is then polished by Newton (Hewer) steps (:func:`_polish`), one in
+    the usual case: the doubling accumulates rounding errors that, with ill-scaled weights
+    (say R = diag(0.01, 44)) leave a relative Riccati residual of 1e-11 and a relative error
+    of ``K`` of ~3e-8, and near the stabilisability boundary (a closed-loop pole within ~1e-5
+    of the unit circle) errors of ``P`` up to 1e-4. Checked against a 50-digit reference:
+    after polishing, the relative error of ``K`` was below 2e-10 wherever the closed-loop
+    margin exceeds 1e-6 and below 1e-7 down to a margin of 1e-9, where scipy's
+    ``solve_discrete_are`` was off by up to 0.5 or failed. If Newton does not settle below
+    ``NEWTON_RELIABLE`` the result is reported as not converged.
+
     Parameters
     ----------
     a : ndarray, shape (n, n)
@@ -443,9 +588,10 @@ def solve_dare_nb(a, b, q, r, p_out):
     Returns
     -------
     converged : bool
-        False if the iteration did not converge within ``DARE_MAX_ITER`` steps, met a singular
-        ``W_k`` or ``R``, or produced non-finite numbers. Convergence alone does not prove that
-        ``P`` is stabilising: check the closed loop (as :func:`lqr_gain_nb` does).
+        False if the doubling did not converge within ``DARE_MAX_ITER`` steps, met a singular
+        ``W_k`` or ``R`` or non-finite numbers, or the Newton polish failed. Convergence alone
+        does not prove that ``P`` is stabilising: check the closed loop (as
+        :func:`lqr_gain_nb` does).
     iterations : int
         Number of doubling steps taken.
     """
@@ -459,8 +605,7 @@ def _radius_below(m, bound, n):
     if not _max_abs(m, n, n) < np.inf:
         return False
     if bound > _SHORTCUT_RADIUS:
-        x = np.empty((n, n))
-        _copy(m, x, n, n)
+        x = m.copy()
         y = np.empty((n, n))
         for _ in range(12):
             _matmul(x, x, y, n, n, n)
@@ -544,13 +689,14 @@ def lqr_gain_nb(rho, alpha, beta, v, omega, v_h, omega_h, d, dt, zoh, rho_min,
     Returns
     -------
     bool
-        False where no stabilising gain was found: the SDA did not converge, a number is not
-        finite, or the closed loop ``A_bar - B_bar K`` has spectral radius >= 1 - 1e-9 (the
-        test of :func:`companion.lqr.dlqr`).
+        False where no stabilising gain was found: the SDA or its Newton polish did not
+        converge (see :func:`solve_dare_nb`), a number is not finite, or the closed loop
+        ``A_bar - B_bar K`` has spectral radius >= 1 - 1e-9 (the test of
+        :func:`companion.lqr.dlqr`; see :func:`spectral_radius_below`).
     """
     nx, nu = 5, 2
     jx, ju = jacobians_nb(max(rho, rho_min), alpha, beta, v, omega, v_h, omega_h, d)
-    a, b = discretize_nb(jx, ju, dt, zoh)
+    a, b = _discretize(jx, ju, dt, zoh, 3, 2, nx)
     a_bar, b_bar = augment_nb(a, b)
     q = np.zeros((nx, nx))
     for i in range(nx):
@@ -560,28 +706,12 @@ def lqr_gain_nb(rho, alpha, beta, v, omega, v_h, omega_h, d, dt, zoh, rho_min,
         r[i, i] = r_diag[i]
     p = np.empty((nx, nx))
     ok, _ = _sda(a_bar, b_bar, q, r, p, nx, nu)
-    if not ok:
+    if not (ok and _gain(a_bar, b_bar, r, p, k_out, nx, nu)):
         return False
-    # K = (R + B'PB)^-1 B'PA
-    bt_p = np.empty((nu, nx))
-    _matmul_tn(b_bar, p, bt_p, nu, nx, nx)
-    s = np.empty((nu, nu))
-    _matmul(bt_p, b_bar, s, nu, nx, nu)
-    for i in range(nu):
-        for j in range(nu):
-            s[i, j] += r[i, j]
-    _matmul(bt_p, a_bar, k_out, nu, nx, nx)
-    piv = np.empty(nu, np.int64)
-    if not _lu_factor(s, piv, nu):
-        return False
-    _lu_solve(s, piv, k_out, nu, nx)
     if not _max_abs(k_out, nu, nx) < np.inf:
         return False
     closed = np.empty((nx, nx))
-    _matmul(b_bar, k_out, closed, nx, nu, nx)
-    for i in range(nx):
-        for j in range(nx):
-            closed[i, j] = a_bar[i, j] - closed[i, j]
+    _closed_loop(a_bar, b_bar, k_out, closed, nx, nu)
     return _radius_below(closed, 1.0 - RADIUS_MARGIN, nx)
 
 

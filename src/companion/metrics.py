@@ -10,7 +10,8 @@
   ``beta_ref`` is the heading offset that holding the slot needs (0 on straight walks);
 * final absolute errors (last sample, beta against beta_ref);
 * obstacle clearance (robot footprint to the nearest obstacle surface) and the number of
-  separate collisions.
+  separate collisions;
+* the shares of the samples in which the safety supervisor was ok, degraded or stopped.
 """
 
 from __future__ import annotations
@@ -72,6 +73,14 @@ def obstacle_metrics(log: Log) -> dict:
     return {"min_obstacle_clearance_m": float(np.nanmin(rho_ob)), "obstacle_collisions": entries}
 
 
+def status_shares(log: Log) -> dict:
+    """Shares of the samples in which the safety supervisor reported each status."""
+    status = log.columns.get("status")
+    if status is None or len(status) == 0:
+        return {"share_ok": 1.0, "share_degraded": 0.0, "share_stopped": 0.0}
+    return {f"share_{s}": float(np.mean(status == s)) for s in ("ok", "degraded", "stopped")}
+
+
 def _duration(log: Log) -> float:
     """Simulated time covered by the log: the last sample plus one period."""
     t = log["t"]
@@ -100,6 +109,7 @@ def compute(log: Log, tol: Tolerance = Tolerance()) -> dict:
         "steps": len(log),
     }
     values.update(obstacle_metrics(log))
+    values.update(status_shares(log))
     finite = all(math.isfinite(v) for v in (values["rmse_rho_m"], values["rmse_alpha_rad"]))
     values["finite"] = bool(finite and np.all(np.isfinite(log["v"]))
                             and np.all(np.isfinite(log["omega"])))

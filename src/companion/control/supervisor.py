@@ -192,24 +192,23 @@ def rollout_margins(robot: Pose, current: tuple[float, float], targets: np.ndarr
 
 def evasive_target(robot: Pose, current: tuple[float, float], nominal: tuple[float, float],
                    person: PersonState, obstacles: Sequence[Obstacle], params: Params,
-                   needed: float = 0.05) -> tuple[float, float] | None:
+                   needed: float = 0.05, comfort: float = 0.2) -> tuple[float, float] | None:
     """A replacement for the ``nominal`` target if its predicted margin
-    (:func:`rollout_margins`) is below ``needed`` m: among a grid of targets the one closest to
-    the nominal whose margin is at least ``needed``, else the one with the largest margin.
-    None when the nominal target is safe."""
+    (:func:`rollout_margins`) is below ``needed`` m, else None.
+
+    The replacement is the grid target with the best score ``min(margin, comfort) - 0.02 *
+    change``: margins count up to ``comfort`` m, and among equally safe targets the one
+    closest to the nominal (``change``: distance in units of v_max and omega_max) wins.
+    """
     r = params.robot
     grid = np.array([(a * r.v_max, b * r.omega_max) for a in _V_GRID for b in _W_GRID])
     targets = np.vstack([np.array(nominal), grid])
     margin = rollout_margins(robot, current, targets, person, obstacles, params)
     if margin[0] >= needed:
         return None
-    ok = np.flatnonzero(margin[1:] >= needed) + 1
-    if ok.size == 0:
-        best = int(np.argmax(margin))
-    else:
-        change = np.hypot((targets[ok, 0] - nominal[0]) / r.v_max,
-                          (targets[ok, 1] - nominal[1]) / r.omega_max)
-        best = int(ok[np.argmin(change)])
+    change = np.hypot((targets[:, 0] - nominal[0]) / r.v_max,
+                      (targets[:, 1] - nominal[1]) / r.omega_max)
+    best = int(np.argmax(np.minimum(margin, comfort) - 0.02 * change))
     return float(targets[best, 0]), float(targets[best, 1])
 
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from companion.control import make_controller
 from companion.control.supervisor import obstacle_clearances
-from companion.metrics import obstacle_metrics
+from companion.metrics import obstacle_metrics, status_shares
 from companion.obstacles import Circle, Obstacle, Wall
 from companion.params import Params
 from companion.sim.episode import Log, run_episode
@@ -122,7 +122,6 @@ def summarize(log: Log, params: Params) -> dict:
     obstacles = obstacle_metrics(log)
     numeric = [log[c] for c in log.columns if c not in ("status", "reason", "rho_ob")]
     person_contact = dist < params.robot.radius + params.lidar.person_radius
-    status = log["status"]
     return {
         "duration_s": float(len(log) * params.dt),
         "steps": len(log),
@@ -132,9 +131,7 @@ def summarize(log: Log, params: Params) -> dict:
         "min_person_distance_m": float(np.min(dist)),
         "obstacle_collisions": obstacles["obstacle_collisions"],
         "min_obstacle_clearance_m": obstacles["min_obstacle_clearance_m"],
-        "share_ok": float(np.mean(status == "ok")),
-        "share_degraded": float(np.mean(status == "degraded")),
-        "share_stopped": float(np.mean(status == "stopped")),
+        **status_shares(log),
         "rmse_rho_m": float(np.sqrt(np.mean(np.square(log["rho"] - log["rho_d"])))),
     }
 

@@ -1,0 +1,149 @@
+"""Time the compiled LQR gain (companion.fastlqr) against the scipy path.
+
+    python bench/fastlqr.py [--points N] [--seed S]
+
+For each discretisation ('euler', the default, and 'zoh') and the same random operating points
+(default Params otherwise), prints the median and 99th percentile time per gain of:
+
+* ``lqr_gain_nb`` called from a compiled loop (no Python in between): per operating point, the
+  mean over REPEAT calls, then median / p99 over the points;
+* ``lqr_gain_nb`` called from Python, one timed call at a time (numba dispatch included);
+* the Python wrapper ``lqr_gain(chi, u, w, params)`` (argument unpacking, arrays, dispatch);
+* the scipy path ``LqrController(params).gain(chi, u, w)``;
+
+and the speed-up of each over scipy (ratio of medians), plus the SDA iteration counts and the
+largest relative difference between the compiled and the scipy gains on these points. BLAS is
+limited to one thread.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+
+import numpy as np
+import scipy.linalg  # noqa: F401  (loaded before threadpool_limits, which only limits loaded libs)
+from numba import njit
+from threadpoolctl import threadpool_limits
+
+from companion import fastlqr
+from companion.control.lqr import LqrController
+from companion.lqr import augment
+from companion.model import discretize, jacobians
+from companion.params import LqrParams, Params
+
+REPEAT = 200  # calls per operating point in the compiled loop
+
+
+def operating_points(n: int, seed: int) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Random controller operating points ``(chi, u, w)`` with the person walking."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        chi = np.array([rng.uniform(0.3, 3.0), rng.uniform(0.0, 2.0 * math.pi),
+                        rng.uniform(-math.pi, math.pi)])
+        u = np.array([rng.uniform(-1.5, 1.5), rng.uniform(-0.5 * math.pi, 0.5 * math.pi)])
+        w = np.array([rng.uniform(0.2, 1.5), rng.uniform(-1.0, 1.0)])
+        out.append((chi, u, w))
+    return out
+
+
+def stats(seconds: list[float] | np.ndarray) -> tuple[float, float]:
+    """Median and 99th percentile in microseconds."""
+    us = np.asarray(seconds) * 1e6
+    return float(np.median(us)), float(np.percentile(us, 99))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--points", type=int, default=2000, help="operating points (default 2000)")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+
+    @njit
+    def repeat(n, rho, alpha, beta, v, omega, v_h, omega_h, d, dt, zoh, rho_min, q, r, k):
+        ok = True
+        for _ in range(n):
+            ok = fastlqr.lqr_gain_nb(rho, alpha, beta, v, omega, v_h, omega_h, d, dt, zoh,
+                                     rho_min, q, r, k)
+        return ok
+
+    points = operating_points(args.points, args.seed)
+    print(f"{len(points)} operating points, seed {args.seed}")
+    for method in ("euler", "zoh"):
+        params = Params().replace(lqr=LqrParams(discretization=method))
+        lqr = params.lqr
+        zoh = method == "zoh"
+        q, r = np.array(lqr.q), np.array(lqr.r)
+        k = np.empty((2, 5))
+
+        def call_args(chi, u, w):
+            return (chi[0], chi[1], chi[2], u[0], u[1], w[0], w[1], params.robot.d, params.dt,
+                    zoh, lqr.rho_min, q, r, k)
+
+        t = time.perf_counter()
+        fastlqr.lqr_gain_nb(*call_args(*points[0]))
+        first = time.perf_counter() - t
+        controller = LqrController(params)
+
+        # Keep the points where scipy finds a gain (all, for walking persons) and record the
+        # SDA iterations and the difference of the gains.
+        kept, iterations, worst = [], [], 0.0
+        for chi, u, w in points:
+            try:
+                k_ref = controller.gain(chi, u, w)
+            except np.linalg.LinAlgError:
+                continue
+            if not fastlqr.lqr_gain_nb(*call_args(chi, u, w)):
+                print(f"  compiled gain failed where scipy succeeded: {chi} {u} {w}")
+                continue
+            worst = max(worst, float(np.max(np.abs(k - k_ref)) / np.max(np.abs(k_ref))))
+            lin = np.array([max(chi[0], lqr.rho_min), chi[1], chi[2]])
+            a_bar, b_bar = augment(*discretize(*jacobians(lin, u, w, params.robot.d),
+                                               params.dt, method))
+            _, it = fastlqr.solve_dare_nb(a_bar, b_bar, np.diag(q), np.diag(r), np.empty((5, 5)))
+            iterations.append(it)
+            kept.append((chi, u, w))
+
+        repeat(1, *call_args(*kept[0]))  # compile the loop
+        loop = []
+        for p in kept:
+            t = time.perf_counter()
+            repeat(REPEAT, *call_args(*p))
+            loop.append((time.perf_counter() - t) / REPEAT)
+        from_python = []
+        for p in kept:
+            a = call_args(*p)
+            t = time.perf_counter()
+            fastlqr.lqr_gain_nb(*a)
+            from_python.append(time.perf_counter() - t)
+        wrapper = []
+        for chi, u, w in kept:
+            t = time.perf_counter()
+            fastlqr.lqr_gain(chi, u, w, params)
+            wrapper.append(time.perf_counter() - t)
+        scipy_path = []
+        for chi, u, w in kept:
+            t = time.perf_counter()
+            controller.gain(chi, u, w)
+            scipy_path.append(time.perf_counter() - t)
+
+        ref_median = stats(scipy_path)[0]
+        its = np.array(iterations)
+        print(f"\ndiscretization={method}: {len(kept)} points with a gain; first call "
+              f"{first:.3f} s; SDA iterations median {np.median(its):.0f}, "
+              f"p99 {np.percentile(its, 99):.0f}, max {its.max()}; "
+              f"max |K - K_scipy| / max|K_scipy| = {worst:.1e}")
+        print(f"  {'path':34s} {'median':>10s} {'p99':>10s} {'speed-up':>9s}")
+        for name, times in (("lqr_gain_nb, compiled loop", loop),
+                            ("lqr_gain_nb, from Python", from_python),
+                            ("lqr_gain (Python wrapper)", wrapper),
+                            ("LqrController.gain (scipy)", scipy_path)):
+            median, p99 = stats(times)
+            print(f"  {name:34s} {median:8.2f}us {p99:8.2f}us {ref_median / median:8.0f}x")
+
+
+if __name__ == "__main__":
+    with threadpool_limits(limits=1):
+        main()
