@@ -32,7 +32,8 @@ Per call, in this order:
 6. **Keep-out.** Inside ``protective_distance`` of the person the robot may only rotate or
    move away (``protective_zone``). Outside it, and towards obstacles, the speed of approach is
    limited to what braking at the deceleration limit can still stop before the protective
-   distance (the person) or contact (obstacles), counting one period of delay.
+   distance (the person) or :data:`CONTACT_MARGIN` short of contact (obstacles), counting one
+   period of delay; an evasive check replaces commands predicted to come too close.
 7. **Rate limits** towards the target (the controller's command, or zero when stopped), then
    the velocity limits. A stopped robot therefore brakes at ``decel_max`` and
    ``angular_accel_max``, and a resuming one ramps up: no jump beyond the limits.
@@ -52,6 +53,9 @@ from companion.params import Params
 from companion.perception import Scan
 
 OK, DEGRADED, STOPPED = "ok", "degraded", "stopped"
+
+#: Clearance (m) short of contact at which the braking bound towards obstacles stops the robot.
+CONTACT_MARGIN = 0.02
 
 
 def _finite(*values: float) -> bool:
@@ -428,7 +432,8 @@ class SafetySupervisor:
                 bounds.append(speed_bound(robot.theta, nx, ny, max(approach, 0.0),
                                           braking_speed(gap, net, p.dt)))
         for nx, ny, gap in obstacle_normals(robot, obstacles, p.robot.radius):
-            bounds.append(speed_bound(robot.theta, nx, ny, 0.0, braking_speed(gap, rate, p.dt)))
+            bounds.append(speed_bound(robot.theta, nx, ny, 0.0,
+                                      braking_speed(gap - CONTACT_MARGIN, rate, p.dt)))
         return clip_to(v, bounds, p.robot.v_max)
 
     def _limit(self, v: float, omega: float, u_ob: float) -> Command:
