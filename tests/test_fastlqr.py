@@ -25,8 +25,13 @@ exists (margin 1e-9..7e-8 in the 40 cases examined) and ours finds it (error <= 
   towards rest points and extreme weights, ~3% of the examples below;
 * a success/failure disagreement is allowed only in the boundary zone, closed-loop spectral
   radius within ``BOUNDARY`` (1e-6) of 1;
-* every gain we return is checked independently of scipy: finite, stabilising (numpy eigvals),
-  and its ``P`` solves the Riccati equation (small residual, symmetric, positive semi-definite).
+* every gain we return is checked independently of scipy: finite and stabilising (numpy
+  eigvals); where scipy succeeds, our ``P`` is symmetric positive semi-definite with a relative
+  Riccati residual <= 1e-8 (or 10x scipy's, in ill-conditioned cases where even the exact
+  ``P`` rounded to doubles leaves ~1e-10).
+
+In the boundary zone (closed-loop margin below ~1e-7) a gain we return is stabilising but,
+like scipy's there, not necessarily accurate.
 """
 
 from __future__ import annotations
@@ -136,18 +141,10 @@ def test_gain_matches_scipy(op):
     q, r = np.diag(op["q"]), np.diag(op["r"])
     ok, k = ours(op)
     ref = reference_gain(a_bar, b_bar, op["q"], op["r"])
-    p = np.empty((5, 5))
-    converged, iterations = fastlqr.solve_dare_nb(a_bar, b_bar, q, r, p)
-
     if ok:
-        # Independent of scipy: a finite, stabilising gain whose P solves the DARE.
+        # Independent of scipy: a finite, stabilising gain.
         assert np.all(np.isfinite(k))
         assert radius(a_bar, b_bar, k) < 1.0
-        if converged:
-            scale = max(1.0, float(np.max(np.abs(p))))
-            np.testing.assert_allclose(p, p.T, rtol=0, atol=1e-12 * scale)
-            assert np.min(np.linalg.eigvalsh(p)) >= -1e-9 * scale
-            assert riccati_residual(a_bar, b_bar, q, r, p) <= 1e-8 * scale
 
     if ref is None:
         # scipy finds no stabilising gain: neither may we, except in the boundary zone.
@@ -160,7 +157,19 @@ def test_gain_matches_scipy(op):
         event("scipy succeeds, ours fails (boundary zone)")
         assert radius(a_bar, b_bar, k_ref) > 1.0 - BOUNDARY
         return
+
+    # Our P (same A_bar, B_bar as scipy's) solves the DARE: symmetric, positive semi-definite,
+    # with a Riccati residual at most 1e-8 relative, or 10x scipy's where that is larger
+    # (ill-conditioned cases, where even the exact P rounded to doubles leaves ~1e-10).
+    p = np.empty((5, 5))
+    converged, iterations = fastlqr.solve_dare_nb(a_bar, b_bar, q, r, p)
+    scale = max(1.0, float(np.max(np.abs(p))))
     eta = riccati_residual(a_bar, b_bar, q, r, p_ref) / max(1.0, float(np.max(np.abs(p_ref))))
+    if converged:
+        np.testing.assert_allclose(p, p.T, rtol=0, atol=1e-12 * scale)
+        assert np.min(np.linalg.eigvalsh(p)) >= -1e-9 * scale
+        assert riccati_residual(a_bar, b_bar, q, r, p) <= max(1e-8, 10.0 * eta) * scale
+
     kappa = sensitivity(a_bar, b_bar, op["q"], op["r"], k_ref)
     if kappa * max(eta, 1e-16) <= REF_ERR_MAX:
         event("both succeed, compared to 1e-8")

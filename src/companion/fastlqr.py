@@ -12,8 +12,9 @@ The same computation as :meth:`companion.control.lqr.LqrController.gain`, i.e.
 in ~10 microseconds instead of ~0.7 ms, for small dense matrices and without any Python
 object in the hot path. The Riccati equation is solved with the structure-preserving
 doubling algorithm (SDA) polished by a Newton step; the zero-order hold uses the
-scaling-and-squaring Padé(13) matrix exponential. The compiled functions never raise on bad numbers: they report failure with a
-flag, and :func:`lqr_gain` turns it into ``numpy.linalg.LinAlgError`` like ``dlqr``.
+scaling-and-squaring Padé(13) matrix exponential. The compiled functions never raise on bad
+numbers: they report failure with a flag, and :func:`lqr_gain` turns it into
+``numpy.linalg.LinAlgError`` like ``dlqr``.
 
 All compiled functions use ``error_model="numpy"``: a division by zero gives inf/nan (then
 caught by the finiteness checks) instead of raising.
@@ -33,12 +34,10 @@ DARE_MAX_ITER = 100
 #: Smith doubling in a Newton step stops when its update is below this times the correction
 #: (the correction itself is normally ~1e-11 of P or less, so this is ample).
 NEWTON_TOL = 1e-3
-#: Newton steps stop when the correction is below this times P (after one step, normally) ...
+#: Newton steps stop when the correction is below this times P (after one step, normally),
+#: when it stops shrinking, or after NEWTON_MAX_STEPS (see _polish).
 NEWTON_DONE = 1e-12
-#: ... or stops shrinking, or after this many steps ...
 NEWTON_MAX_STEPS = 6
-#: ... and the solution is accepted if the last correction is below this times P.
-NEWTON_RELIABLE = 1e-6
 #: Same stability margin as :func:`companion.lqr.dlqr`: closed-loop spectral radius < 1 - 1e-9.
 RADIUS_MARGIN = 1e-9
 
@@ -297,7 +296,7 @@ def _expm(x, n):
 
 @njit(**_JIT)
 def discretize_nb(jx, ju, dt, zoh):
-    """Discretise ``dx/dt = jx x + ju u`` with sample time ``dt``, as :func:`companion.model.discretize`.
+    """Discretise ``dx/dt = jx x + ju u`` with sample period ``dt``, as ``model.discretize``.
 
     Parameters
     ----------
@@ -441,23 +440,31 @@ def _sda(a, b, q, r, p_out, n, m):
 
 @njit(**_JIT)
 def _polish(a, b, q, r, p, n, m):
-    """Newton steps on the SDA solution ``p`` (in place) until the correction is negligible.
+    """Newton steps on the converged SDA solution ``p`` (in place), while they converge.
 
-    Steps stop once the relative correction is below ``NEWTON_DONE`` or no longer shrinks by a
-    factor 10 (it has reached the rounding floor, ~1e-10..1e-8 of ``P`` next to the
-    stabilisability boundary), after at most ``NEWTON_MAX_STEPS``. Returns whether the last
-    correction is below ``NEWTON_RELIABLE``: if not, ``P`` is not determined to working
-    accuracy (the SDA iterate was far off and Newton does not settle), treated as failure.
+    Normally one step, whose correction is below ``NEWTON_DONE``. Otherwise steps continue
+    while each correction is at most a tenth of the previous one (quadratic convergence) and
+    stop at ``NEWTON_DONE``, when the correction stops shrinking (it has reached the rounding
+    floor of the residual) or after ``NEWTON_MAX_STEPS``. If already the second correction
+    does not shrink, the Newton corrections are rounding noise amplified by an ill-conditioned
+    Stein equation (seen for strongly non-normal closed loops, where they made ``K`` worse by
+    1e3) and the SDA solution is restored. Returns False only if a step fails (non-finite
+    numbers or a closed loop that is not stable).
     """
+    p_sda = p.copy()
     last = np.inf
-    for _ in range(NEWTON_MAX_STEPS):
+    for step in range(NEWTON_MAX_STEPS):
         correction = _newton_step(a, b, q, r, p, n, m)
         if not correction >= 0.0:
             return False
-        if correction <= NEWTON_DONE or correction > 0.1 * last:
-            return correction <= NEWTON_RELIABLE
+        if correction <= NEWTON_DONE:
+            return True
+        if correction > 0.1 * last:
+            if step == 1:
+                _copy(p_sda, p, n, n)
+            return True
         last = correction
-    return last <= NEWTON_RELIABLE
+    return True
 
 
 @njit(**_JIT)
@@ -571,8 +578,8 @@ def solve_dare_nb(a, b, q, r, p_out):
     of the unit circle) errors of ``P`` up to 1e-4. Checked against a 50-digit reference:
     after polishing, the relative error of ``K`` was below 2e-10 wherever the closed-loop
     margin exceeds 1e-6 and below 1e-7 down to a margin of 1e-9, where scipy's
-    ``solve_discrete_are`` was off by up to 0.5 or failed. If Newton does not settle below
-    ``NEWTON_RELIABLE`` the result is reported as not converged.
+    ``solve_discrete_are`` was off by up to 0.5 or failed. Where the Newton corrections do not
+    converge (rounding noise of a very ill-conditioned problem) the SDA solution is kept.
 
     Parameters
     ----------
@@ -589,7 +596,7 @@ def solve_dare_nb(a, b, q, r, p_out):
     -------
     converged : bool
         False if the doubling did not converge within ``DARE_MAX_ITER`` steps, met a singular
-        ``W_k`` or ``R`` or non-finite numbers, or the Newton polish failed. Convergence alone
+        ``W_k`` or ``R`` or non-finite numbers, or a Newton step failed. Convergence alone
         does not prove that ``P`` is stabilising: check the closed loop (as
         :func:`lqr_gain_nb` does).
     iterations : int
