@@ -49,6 +49,14 @@ def operating_points(n: int, seed: int) -> list[tuple[np.ndarray, np.ndarray, np
     return out
 
 
+def gain_args(chi, u, w, params: Params, k: np.ndarray) -> tuple:
+    """Arguments of ``lqr_gain_nb`` for an operating point (floats and float64 arrays)."""
+    lqr = params.lqr
+    return (float(chi[0]), float(chi[1]), float(chi[2]), float(u[0]), float(u[1]),
+            float(w[0]), float(w[1]), params.robot.d, params.dt, lqr.discretization == "zoh",
+            lqr.rho_min, np.array(lqr.q), np.array(lqr.r), k)
+
+
 def stats(seconds: list[float] | np.ndarray) -> tuple[float, float]:
     """Median and 99th percentile in microseconds."""
     us = np.asarray(seconds) * 1e6
@@ -74,16 +82,9 @@ def main() -> None:
     for method in ("euler", "zoh"):
         params = Params().replace(lqr=LqrParams(discretization=method))
         lqr = params.lqr
-        zoh = method == "zoh"
-        q, r = np.array(lqr.q), np.array(lqr.r)
         k = np.empty((2, 5))
-
-        def call_args(chi, u, w):
-            return (chi[0], chi[1], chi[2], u[0], u[1], w[0], w[1], params.robot.d, params.dt,
-                    zoh, lqr.rho_min, q, r, k)
-
         t = time.perf_counter()
-        fastlqr.lqr_gain_nb(*call_args(*points[0]))
+        fastlqr.lqr_gain_nb(*gain_args(*points[0], params, k))
         first = time.perf_counter() - t
         controller = LqrController(params)
 
@@ -95,26 +96,27 @@ def main() -> None:
                 k_ref = controller.gain(chi, u, w)
             except np.linalg.LinAlgError:
                 continue
-            if not fastlqr.lqr_gain_nb(*call_args(chi, u, w)):
+            if not fastlqr.lqr_gain_nb(*gain_args(chi, u, w, params, k)):
                 print(f"  compiled gain failed where scipy succeeded: {chi} {u} {w}")
                 continue
             worst = max(worst, float(np.max(np.abs(k - k_ref)) / np.max(np.abs(k_ref))))
             lin = np.array([max(chi[0], lqr.rho_min), chi[1], chi[2]])
             a_bar, b_bar = augment(*discretize(*jacobians(lin, u, w, params.robot.d),
                                                params.dt, method))
-            _, it = fastlqr.solve_dare_nb(a_bar, b_bar, np.diag(q), np.diag(r), np.empty((5, 5)))
+            _, it = fastlqr.solve_dare_nb(a_bar, b_bar, np.diag(lqr.q), np.diag(lqr.r),
+                                          np.empty((5, 5)))
             iterations.append(it)
             kept.append((chi, u, w))
 
-        repeat(1, *call_args(*kept[0]))  # compile the loop
+        repeat(1, *gain_args(*kept[0], params, k))  # compile the loop
         loop = []
         for p in kept:
             t = time.perf_counter()
-            repeat(REPEAT, *call_args(*p))
+            repeat(REPEAT, *gain_args(*p, params, k))
             loop.append((time.perf_counter() - t) / REPEAT)
         from_python = []
         for p in kept:
-            a = call_args(*p)
+            a = gain_args(*p, params, k)
             t = time.perf_counter()
             fastlqr.lqr_gain_nb(*a)
             from_python.append(time.perf_counter() - t)

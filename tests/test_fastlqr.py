@@ -78,9 +78,9 @@ weights = st.one_of(st.just((DEFAULT_Q, DEFAULT_R)),
 def operating_points(draw):
     """An operating point and controller settings, as a dict."""
     q, r = draw(weights)
-    return dict(chi=(draw(rhos), draw(angles), draw(angles)), u=(draw(vs), draw(omegas)),
-                w=(draw(person_vs), draw(person_omegas)), d=draw(offsets), dt=draw(periods),
-                method=draw(methods), q=np.array(q), r=np.array(r))
+    return {"chi": (draw(rhos), draw(angles), draw(angles)), "u": (draw(vs), draw(omegas)),
+            "w": (draw(person_vs), draw(person_omegas)), "d": draw(offsets),
+            "dt": draw(periods), "method": draw(methods), "q": np.array(q), "r": np.array(r)}
 
 
 def reference_model(op):
@@ -181,8 +181,8 @@ def test_gain_matches_scipy(op):
 
 def test_rest_point_has_no_stabilising_gain():
     """Robot and person at rest: the heading mode is uncontrollable (A = I, rank B = 2)."""
-    op = dict(chi=(1.0, 0.5 * math.pi, 0.0), u=(0.0, 0.0), w=(0.0, 0.0), d=0.25, dt=0.05,
-              q=np.array(DEFAULT_Q), r=np.array(DEFAULT_R))
+    op = {"chi": (1.0, 0.5 * math.pi, 0.0), "u": (0.0, 0.0), "w": (0.0, 0.0), "d": 0.25,
+          "dt": 0.05, "q": np.array(DEFAULT_Q), "r": np.array(DEFAULT_R)}
     for method in ("euler", "zoh"):
         op["method"] = method
         assert reference_gain(*reference_model(op), op["q"], op["r"]) is None

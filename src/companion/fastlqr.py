@@ -50,7 +50,7 @@ _THETA13 = 5.371920351148152
 # spectral_radius_below only proves bounds above this.
 _SHORTCUT_RADIUS = 0.5 ** (1.0 / 4096.0)
 
-_JIT = dict(cache=True, error_model="numpy")
+_JIT = {"cache": True, "error_model": "numpy"}
 
 # The kernels below take their dimensions as arguments. Called from compiled code with literal
 # sizes (the 5x5 / 5x2 LQR problem in lqr_gain_nb), numba compiles a specialisation for those
@@ -243,7 +243,7 @@ def _expm(x, n):
         return np.full((n, n), np.nan)
     s = 0
     if nrm > _THETA13:
-        s = int(math.ceil(math.log2(nrm / _THETA13)))
+        s = math.ceil(math.log2(nrm / _THETA13))
     scale = 0.5 ** s
     c = _PADE13
     a = np.empty((n, n))

@@ -117,7 +117,11 @@ class SupervisorParams(Validated):
                                   "predicted forward at constant speed and turn rate)", positive)
     max_person_speed: float = param(3.0, "m/s", "a person observation farther from the last "
                                     "accepted one than this speed allows (plus jump_tolerance) "
-                                    "is an outlier (identity switch) and is rejected", positive)
+                                    "is an outlier (identity switch) and is rejected; a "
+                                    "reported person speed above it is clipped to it", positive)
+    max_person_turn_rate: float = param(2.0 * math.pi, "rad/s", "a reported person turn rate "
+                                        "above this is clipped to it before the person is "
+                                        "predicted forward", positive)
     jump_tolerance: float = param(0.2, "m", "position noise allowed on top of max_person_speed "
                                   "in the outlier gate", non_negative)
     reacquire_time: float = param(0.3, "s", "after the person was lost, observations must be "

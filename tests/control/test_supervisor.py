@@ -162,6 +162,31 @@ def test_fault2_inf_in_the_person_and_obstacles_is_never_propagated():
             assert "person_invalid" in cmd.reason
 
 
+@pytest.mark.parametrize("v, omega", [(0.0, 1.4980776123852631e+308), (-1e308, 0.0),
+                                      (5.0, -20.0)])
+def test_fault2_huge_person_rates_are_clipped(v, omega):
+    """Finite but absurd person rates would overflow the forward prediction (found by the fuzz
+    test): the controller only ever sees them clipped to the plausible bounds."""
+    seen = []
+
+    class Recorder(Spy):
+        def step(self, obs):
+            seen.append(obs.person)
+            return super().step(obs)
+
+    sup = SafetySupervisor(Recorder(), P)
+    for k, t in enumerate([0.0, 0.05, 0.1, 0.15]):
+        h = PersonState(-3.0, 0.0, 0.0, v, omega) if k % 2 == 0 else None  # odd: predicted
+        cmd = sup.step(Observation(t, Pose(0.0, 0.0, 0.0), h))
+        assert math.isfinite(cmd.v) and math.isfinite(cmd.omega)
+        if h is not None:
+            assert "person_rate_clipped" in cmd.reason.split("+")
+    assert len(seen) == 4
+    for person in seen:
+        assert abs(person.v) <= S.max_person_speed and abs(person.omega) <= S.max_person_turn_rate
+        assert all(math.isfinite(x) for x in (person.x, person.y, person.theta))
+
+
 # -- fault 3: identity switch ----------------------------------------------------------------
 
 def test_fault3_person_jump_is_rejected_as_an_outlier():

@@ -345,6 +345,11 @@ class SafetySupervisor:
         if not person_is_finite(h):
             reasons.append("person_invalid")
             return
+        v = min(max(h.v, -s.max_person_speed), s.max_person_speed)
+        w = min(max(h.omega, -s.max_person_turn_rate), s.max_person_turn_rate)
+        if (v, w) != (h.v, h.omega):
+            reasons.append("person_rate_clipped")
+            h = PersonState(h.x, h.y, h.theta, v, w)
         if self._track is None and not self._lost:   # first estimate of the episode
             self._accept(h)
             return
