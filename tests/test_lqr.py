@@ -251,7 +251,7 @@ def _check_command(c, cmd):
     assert abs(cmd.v) <= V_MAX and abs(cmd.omega) <= OMEGA_MAX
     # No wind-up: the stored u_e(k-1) is the applied command minus the feedforward.
     u_d = np.array(c.last.u_d)
-    np.testing.assert_allclose(c._u_e_prev, np.array([cmd.v, cmd.omega]) - u_d, rtol=0,
+    np.testing.assert_allclose(c.u_e_prev, np.array([cmd.v, cmd.omega]) - u_d, rtol=0,
                                atol=1e-12)
     assert np.all(np.isfinite(c.last.gain)) and np.all(np.isfinite(c.last.xi))
 
@@ -284,7 +284,7 @@ def test_controller_no_windup_after_saturation(kind):
         # u_e(k-1) must stay within the input limits shifted by u_d (a wound-up integrator
         # would leave them).
         u_d = np.array(c.last.u_d)
-        assert np.all(np.abs(c._u_e_prev + u_d) <= np.array([V_MAX, OMEGA_MAX]) + 1e-12)
+        assert np.all(np.abs(c.u_e_prev + u_d) <= np.array([V_MAX, OMEGA_MAX]) + 1e-12)
     assert saturated > 0
 
 

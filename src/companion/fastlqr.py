@@ -760,3 +760,141 @@ def lqr_gain(chi, u, w, params) -> np.ndarray:
     if not ok:
         raise np.linalg.LinAlgError("lqr_gain: no stabilising solution of the Riccati equation")
     return k
+
+
+# -- the whole controller step ---------------------------------------------------------------
+# Compiled twins of companion.kinematics.wrap_pi / wrap_2pi, companion.model.relative_state /
+# slot_reference and the body of LqrController.step: the same floating-point operations in the
+# same order. Results agree to rounding, not always bit for bit (Python's math.hypot is its own
+# correctly rounded algorithm, numba's is not); tests/test_fastlqr.py checks them.
+
+_TWO_PI = 2.0 * math.pi
+
+
+@njit(**_JIT)
+def wrap_pi_nb(angle):
+    """:func:`companion.kinematics.wrap_pi`: wrap to (-pi, pi]."""
+    a = np.fmod(angle + math.pi, _TWO_PI)
+    if a <= 0.0:
+        a += _TWO_PI
+    return a - math.pi
+
+
+@njit(**_JIT)
+def wrap_2pi_nb(angle):
+    """:func:`companion.kinematics.wrap_2pi`: wrap to [0, 2*pi)."""
+    a = np.fmod(angle, _TWO_PI)
+    if a < 0.0:
+        a += _TWO_PI
+    return 0.0 if a >= _TWO_PI else a
+
+
+@njit(**_JIT)
+def relative_state_nb(robot_x, robot_y, robot_theta, person_x, person_y, person_theta, d):
+    """:func:`companion.model.relative_state`: ``(rho, alpha, beta)``."""
+    dx = robot_x + d * math.cos(robot_theta) - person_x
+    dy = robot_y + d * math.sin(robot_theta) - person_y
+    rho = math.hypot(dx, dy)
+    alpha = wrap_2pi_nb(math.atan2(dy, dx) - person_theta)
+    beta = wrap_pi_nb(person_theta - robot_theta)
+    return rho, alpha, beta
+
+
+@njit(**_JIT)
+def slot_reference_nb(v_h, omega_h, rho_d, alpha_d, d):
+    """:func:`companion.model.slot_reference` without the ``feasible`` flag:
+    ``(beta, v, omega)``."""
+    vx = v_h - rho_d * omega_h * math.sin(alpha_d)
+    vy = rho_d * omega_h * math.cos(alpha_d)
+    speed = math.hypot(vx, vy)
+    lateral = d * omega_h
+    if speed < 1e-9:
+        return 0.0, 0.0, omega_h
+    psi = math.atan2(vy, vx)
+    ratio = max(-1.0, min(1.0, lateral / speed))
+    delta = math.asin(ratio)
+    along = math.sqrt(max(speed * speed - lateral * lateral, 0.0))
+    theta_fwd = psi - delta
+    theta_rev = psi + math.pi + delta
+    if abs(wrap_pi_nb(theta_fwd)) <= abs(wrap_pi_nb(theta_rev)):
+        return wrap_pi_nb(-theta_fwd), along, omega_h
+    return wrap_pi_nb(-theta_rev), -along, omega_h
+
+
+#: Layout of the ``config`` array of :func:`lqr_step_nb` (see :func:`lqr_step_config`).
+CONFIG_FIELDS = ("d", "dt", "zoh", "rho_min", "rho_d", "alpha_d", "geometric",
+                 "measured", "clip_rho", "clip_alpha", "clip_beta", "v_max", "omega_max")
+
+
+def lqr_step_config(params) -> np.ndarray:
+    """The parameters :func:`lqr_step_nb` needs, as a float array in :data:`CONFIG_FIELDS`
+    order (flags as 0.0 / 1.0)."""
+    lqr, f, r = params.lqr, params.formation, params.robot
+    return np.array([r.d, params.dt, lqr.discretization == "zoh", lqr.rho_min, f.distance,
+                     f.bearing, lqr.feedforward == "geometric", lqr.linearize_at == "measured",
+                     *lqr.error_clip, r.v_max, r.omega_max], dtype=np.float64)
+
+
+@njit(**_JIT)
+def lqr_step_nb(rx, ry, rth, hx, hy, hth, hv, hw, config, q_diag, r_diag, memory, gain,
+                rest_gain, xi):
+    """One step of :class:`companion.control.lqr.LqrController` with the compiled gain.
+
+    Parameters
+    ----------
+    rx, ry, rth : float
+        Robot pose.
+    hx, hy, hth, hv, hw : float
+        Person state.
+    config : ndarray, shape (13,)
+        :func:`lqr_step_config`.
+    q_diag, r_diag : ndarray, shapes (5,) and (2,)
+    memory : ndarray, shape (3,)
+        ``[v_e(k-1), omega_e(k-1), has_gain]``, updated in place (``u_e`` from the saturated
+        output; the caller overwrites it with the finally applied command).
+    gain : ndarray, shape (2, 5)
+        Last good gain, updated in place.
+    rest_gain : ndarray, shape (2, 5)
+        Fallback while no gain has been found.
+    xi : ndarray, shape (5,)
+        Receives the augmented state.
+
+    Returns
+    -------
+    (v, omega, v_d, omega_d, beta_d) : floats
+    """
+    d, dt, zoh, rho_min = config[0], config[1], config[2] != 0.0, config[3]
+    rho_d, alpha_d = config[4], config[5]
+    rho, alpha, beta = relative_state_nb(rx, ry, rth, hx, hy, hth, d)
+    if config[6] != 0.0:
+        beta_d, v_d, omega_d = slot_reference_nb(hv, hw, rho_d, alpha_d, d)
+    else:
+        beta_d, v_d, omega_d = 0.0, hv, hw
+    e_v, e_w = memory[0], memory[1]
+    if config[7] != 0.0:
+        lin = (rho, alpha, beta, v_d + e_v, omega_d + e_w)
+    else:
+        lin = (rho_d, alpha_d, beta_d, v_d, omega_d)
+    k = np.empty((2, 5))
+    if lqr_gain_nb(lin[0], lin[1], lin[2], lin[3], lin[4], hv, hw, d, dt, zoh, rho_min,
+                   q_diag, r_diag, k):
+        gain[:, :] = k
+        memory[2] = 1.0
+    elif memory[2] == 0.0:
+        gain[:, :] = rest_gain
+        memory[2] = 1.0
+    xi[0] = min(max(rho - rho_d, -config[8]), config[8])
+    xi[1] = min(max(wrap_pi_nb(alpha - alpha_d), -config[9]), config[9])
+    xi[2] = min(max(wrap_pi_nb(beta - beta_d), -config[10]), config[10])
+    xi[3] = e_v
+    xi[4] = e_w
+    du_v = 0.0
+    du_w = 0.0
+    for j in range(5):
+        du_v += gain[0, j] * xi[j]
+        du_w += gain[1, j] * xi[j]
+    v = min(max(v_d + e_v - du_v, -config[11]), config[11])
+    om = min(max(omega_d + e_w - du_w, -config[12]), config[12])
+    memory[0] = v - v_d
+    memory[1] = om - omega_d
+    return v, om, v_d, omega_d, beta_d

@@ -168,7 +168,7 @@ def test_lqr_stores_what_the_layers_sent():
     for k in range(5):
         cmd = ctl.step(dataclasses.replace(obs, t=k * P.dt))
         u_d = np.array(lqr.last.u_d)
-        np.testing.assert_allclose(lqr._u_e_prev,
+        np.testing.assert_allclose(lqr.u_e_prev,
                                    np.array([cmd.v, cmd.omega - cmd.u_ob]) - u_d, atol=1e-12)
         # the barrier allows approaching at most 2/s * (0.7 m - 0.6 m) = 0.2 m/s here
         assert cmd.v <= 0.2 + 1e-9

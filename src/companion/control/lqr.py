@@ -9,7 +9,8 @@ Per sample period:
 4. clip the state error to ``lqr.error_clip`` (ours; the quadratic model is local, so far from
    the slot the controller acts on a bounded error, like tracking a virtual slot that leads the
    robot towards the real one);
-5. solve the Riccati equation for ``K`` and apply ``u = u_d + u_e(k-1) - K xi`` (Eq. 16), clipped
+5. solve the Riccati equation for ``K`` (compiled by default, :mod:`companion.fastlqr`; scipy's
+   ``solve_discrete_are`` with ``lqr.solver = "scipy"``) and apply ``u = u_d + u_e(k-1) - K xi`` (Eq. 16), clipped
    to the input limits; the stored ``u_e(k-1)`` is what was actually applied minus ``u_d``, so
    saturation cannot wind it up (the layers around the controller report the final command
    through :meth:`LqrController.applied`).
@@ -24,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.control.base import Command, Observation, saturate
+from companion.fastlqr import lqr_gain_nb, lqr_step_config, lqr_step_nb
 from companion.kinematics import wrap_pi
 from companion.lqr import augment, dlqr
 from companion.model import discretize, jacobians, relative_state, slot_reference
@@ -44,13 +46,23 @@ class LqrStep:
 
 
 class LqrController:
-    """Augmented-state LQR companion controller; see the module docstring."""
+    """Augmented-state LQR companion controller; see the module docstring.
+
+    With ``lqr.solver = "compiled"`` (default) a step is one call of
+    :func:`companion.fastlqr.lqr_step_nb`; with ``"scipy"`` the same step runs in Python with
+    scipy's Riccati solver (the reference; tests/test_fastlqr.py checks they agree).
+    """
 
     def __init__(self, params: Params):
         self.params = params
-        self._q = np.diag(params.lqr.q)
-        self._r = np.diag(params.lqr.r)
-        self._clip = np.array(params.lqr.error_clip)
+        lqr = params.lqr
+        self._q = np.diag(lqr.q)
+        self._r = np.diag(lqr.r)
+        self._q_diag = np.array(lqr.q, dtype=float)
+        self._r_diag = np.array(lqr.r, dtype=float)
+        self._compiled = lqr.solver == "compiled"
+        self._zoh = lqr.discretization == "zoh"
+        self._config = lqr_step_config(params)
         f = params.formation
         # Fallback gain for operating points without a stabilising Riccati solution (robot and
         # person at rest: the heading mode is then uncontrollable in the linearisation). It is
@@ -59,12 +71,28 @@ class LqrController:
         self._rest_gain = self.gain(np.array([f.distance, f.bearing, ref.beta]),
                                     np.array([ref.v, ref.omega]), np.array([REST_SPEED, 0.0]),
                                     check=True)
+        self._memory = np.zeros(3)    # [v_e(k-1), omega_e(k-1), 1 once a gain is known]
+        self._gain = np.zeros((2, 5))
+        self._xi = np.zeros(5)
         self.reset()
 
     def reset(self) -> None:
-        self._u_e_prev = np.zeros(2)
-        self._gain: np.ndarray | None = None
-        self.last: LqrStep | None = None
+        self._memory[:] = 0.0
+        self._ref: tuple[float, float, float] | None = None   # (v_d, omega_d, beta_d)
+
+    @property
+    def u_e_prev(self) -> tuple[float, float]:
+        """``u_e(k-1)``: the last applied input minus its feedforward."""
+        return float(self._memory[0]), float(self._memory[1])
+
+    @property
+    def last(self) -> LqrStep | None:
+        """Diagnostics of the last step (None before the first)."""
+        if self._ref is None:
+            return None
+        v_d, omega_d, beta_d = self._ref
+        return LqrStep(xi=self._xi.copy(), gain=self._gain.copy(), u_d=(v_d, omega_d),
+                       beta_d=beta_d)
 
     def reference(self, v_h: float, omega_h: float) -> tuple[float, float, float]:
         """``(beta_d, v_d, omega_d)`` of the configured feedforward for a person velocity."""
@@ -74,51 +102,71 @@ class LqrController:
         ref = slot_reference(v_h, omega_h, p.formation.distance, p.formation.bearing, p.robot.d)
         return ref.beta, ref.v, ref.omega
 
-    def gain(self, chi: np.ndarray, u: np.ndarray, w: np.ndarray, check: bool = False
-             ) -> np.ndarray:
-        """LQR gain ``K`` of the augmented model linearised at ``(chi, u, w)``.
+    def gain(self, chi, u, w, check: bool = False) -> np.ndarray:
+        """LQR gain ``K`` (shape (2, 5)) of the augmented model linearised at ``(chi, u, w)``,
+        with the configured ``lqr.solver``.
 
         Raises ``numpy.linalg.LinAlgError`` where no stabilising gain exists.
         """
         p = self.params
+        if self._compiled:
+            k = np.empty((2, 5))
+            if not lqr_gain_nb(float(chi[0]), float(chi[1]), float(chi[2]), float(u[0]),
+                               float(u[1]), float(w[0]), float(w[1]), p.robot.d, p.dt,
+                               self._zoh, p.lqr.rho_min, self._q_diag, self._r_diag, k):
+                raise np.linalg.LinAlgError("no stabilising solution of the Riccati equation")
+            return k
         lin = np.array([max(chi[0], p.lqr.rho_min), chi[1], chi[2]])
-        jx, ju = jacobians(lin, u, w, p.robot.d)
+        jx, ju = jacobians(lin, np.asarray(u, dtype=float), np.asarray(w, dtype=float),
+                           p.robot.d)
         a, b = discretize(jx, ju, p.dt, p.lqr.discretization)
         a_bar, b_bar = augment(a, b)
         k, _ = dlqr(a_bar, b_bar, self._q, self._r, check=check)
         return k
 
     def step(self, obs: Observation) -> Command:
-        p = self.params
         r, h = obs.robot, obs.person
+        if self._compiled:
+            v, om, v_d, omega_d, beta_d = lqr_step_nb(
+                r.x, r.y, r.theta, h.x, h.y, h.theta, h.v, h.omega, self._config,
+                self._q_diag, self._r_diag, self._memory, self._gain, self._rest_gain, self._xi)
+            self._ref = (v_d, omega_d, beta_d)
+            return Command(v, om)
+        return self._step_reference(r, h)
+
+    def _step_reference(self, r, h) -> Command:
+        """The step in Python with the configured (scipy) gain: what ``lqr_step_nb`` does."""
+        p = self.params
         rho, alpha, beta = relative_state(r.x, r.y, r.theta, h.x, h.y, h.theta, p.robot.d)
         beta_d, v_d, omega_d = self.reference(h.v, h.omega)
-        u_d = np.array([v_d, omega_d])
         rho_d, alpha_d = p.formation.distance, p.formation.bearing
-        chi_e = np.array([rho - rho_d, wrap_pi(alpha - alpha_d), wrap_pi(beta - beta_d)])
-        w = np.array([h.v, h.omega])
+        e_v, e_w = self.u_e_prev
         if p.lqr.linearize_at == "desired":
-            chi_lin, u_lin = np.array([rho_d, alpha_d, beta_d]), u_d
+            chi_lin, u_lin = (rho_d, alpha_d, beta_d), (v_d, omega_d)
         else:
-            chi_lin, u_lin = np.array([rho, alpha, beta]), u_d + self._u_e_prev
+            chi_lin, u_lin = (rho, alpha, beta), (v_d + e_v, omega_d + e_w)
         try:
-            self._gain = self.gain(chi_lin, u_lin, w)
+            self._gain[:, :] = self.gain(chi_lin, u_lin, (h.v, h.omega))
+            self._memory[2] = 1.0
         except (np.linalg.LinAlgError, ValueError):
             # No stabilising Riccati solution here: keep the last good gain, or use the
             # fallback computed at construction.
-            if self._gain is None:
-                self._gain = self._rest_gain
-        xi = np.concatenate([np.clip(chi_e, -self._clip, self._clip), self._u_e_prev])
-        du = -self._gain @ xi
-        u = u_d + self._u_e_prev + du
-        v, om = saturate(float(u[0]), float(u[1]), p.robot)
-        self._u_e_prev = np.array([v, om]) - u_d
-        self.last = LqrStep(xi=xi, gain=self._gain, u_d=(v_d, omega_d), beta_d=beta_d)
+            if self._memory[2] == 0.0:
+                self._gain[:, :] = self._rest_gain
+                self._memory[2] = 1.0
+        c_rho, c_alpha, c_beta = p.lqr.error_clip
+        self._xi[:] = (min(max(rho - rho_d, -c_rho), c_rho),
+                       min(max(wrap_pi(alpha - alpha_d), -c_alpha), c_alpha),
+                       min(max(wrap_pi(beta - beta_d), -c_beta), c_beta), e_v, e_w)
+        du_v, du_w = (self._gain @ self._xi).tolist()
+        v, om = saturate(v_d + e_v - du_v, omega_d + e_w - du_w, p.robot)
+        self._memory[:2] = (v - v_d, om - omega_d)
+        self._ref = (v_d, omega_d, beta_d)
         return Command(v, om)
 
     def applied(self, cmd: Command) -> None:
         """Store ``u_e(k-1)`` from the command actually sent (after the safety and avoidance
         layers), without the avoidance part ``u_ob`` (Eq. 20 adds it outside the LQR)."""
-        if self.last is not None:
-            self._u_e_prev = np.array([cmd.v - self.last.u_d[0],
-                                       cmd.omega - cmd.u_ob - self.last.u_d[1]])
+        if self._ref is not None:
+            self._memory[0] = cmd.v - self._ref[0]
+            self._memory[1] = cmd.omega - cmd.u_ob - self._ref[1]
