@@ -183,3 +183,29 @@ def test_convergence_command(tmp_path, capsys):
         rows = list(csv.DictReader(fh))
     assert len(rows) == 24 and all(r["ok"] == "1" for r in rows)
     assert min(float(r["min_person_distance_m"]) for r in rows) >= 0.5
+
+
+def test_bench_json_has_the_documented_keys(tmp_path, capsys):
+    out = tmp_path / "bench.json"
+    code, text, _ = run(["bench", "--json", "--episodes", "3", "--duration", "1",
+                         "--workers", "1", "--no-compile-time", "--out", str(out)], capsys)
+    assert code == 0
+    result = json.loads(text)
+    assert json.loads(out.read_text()) == result
+    assert set(result["step_us"]) == {"lqr", "lqr-paper", "lqr-tuned", "pid", "vsm", "ic"}
+    for figures in list(result["step_us"].values()) + [result["scipy_step_us"]]:
+        assert 0.0 < figures["median"] <= figures["p99"]
+    # scipy's Riccati solver is much slower than the compiled one, even on a busy machine
+    assert result["speedup_vs_scipy"] > 5.0
+    assert result["batch"]["episodes"] == 3 and result["batch"]["all_finite"]
+    assert result["batch_steps_per_s"] > 0.0 and result["peak_rss_mb"] > 10.0
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["bench", "--episodes", "0"], "--episodes: expected a whole number >= 1"),
+    (["bench", "--workers", "0"], "--workers: expected a whole number >= 1"),
+    (["bench", "--duration", "-1"], "--duration: expected a positive number"),
+])
+def test_bench_bad_usage(argv, message, capsys):
+    code, _, err = run(argv, capsys)
+    assert code == 2 and message in err and err.count("\n") == 1

@@ -1,4 +1,5 @@
-"""Command-line interface: ``companion run | scenarios | convergence | pedestrians``.
+"""Command-line interface: ``companion run | scenarios | convergence | pedestrians | soak |
+reproduce | tune | bench``.
 
 Bad usage or bad input files exit with code 2 and one line on stderr naming the file, line or
 key. Output files are written whole or not at all.
@@ -8,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import math
 import sys
 from pathlib import Path
@@ -19,7 +21,7 @@ import numpy as np
 
 from tqdm import tqdm
 
-from companion import metrics, plots, reproduce, tune
+from companion import benchmark, metrics, plots, reproduce, tune
 from companion.control import CONTROLLERS, make_controller
 from companion.control.base import Pose
 from companion.data import pedestrians
@@ -314,6 +316,23 @@ def cmd_tune(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    if args.episodes < 1:
+        raise UsageError(f"--episodes: expected a whole number >= 1, got {args.episodes}")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers: expected a whole number >= 1, got {args.workers}")
+    duration = _positive(args.duration, "--duration")
+    result = benchmark.run(args.episodes, duration, args.workers, not args.no_compile_time,
+                           progress=lambda msg: print(f"bench: {msg}", file=sys.stderr))
+    if args.json:
+        print(json.dumps(result, indent=2, allow_nan=False))
+    else:
+        print(benchmark.text(result))
+    if args.out:
+        write_json(args.out, result)
+    return 0
+
+
 def parser() -> argparse.ArgumentParser:
     ap = OneLineParser(prog="companion",
                        description="Side-by-side companion robot control (LQR).")
@@ -392,6 +411,19 @@ def parser() -> argparse.ArgumentParser:
     sk.add_argument("--log", action="store_true", help="also write log.csv")
     sk.add_argument("--out", metavar="DIR", help="output folder (default out/soak)")
     sk.set_defaults(func=cmd_soak)
+
+    bn = sub.add_parser("bench", help="step latency per controller, the scipy reference, "
+                        "batch throughput and memory (docs/performance.md)")
+    bn.add_argument("--json", action="store_true", help="print the figures as JSON")
+    bn.add_argument("--episodes", type=int, default=1000,
+                    help="figure-8 episodes in the batch measurement (default 1000)")
+    bn.add_argument("--duration", default="60", metavar="S",
+                    help="simulated time per episode in s (default 60)")
+    bn.add_argument("--workers", type=int, help="batch worker processes (default: one per CPU)")
+    bn.add_argument("--no-compile-time", action="store_true",
+                    help="skip the fresh-process compile and warm-up measurement")
+    bn.add_argument("--out", metavar="FILE", help="also write the JSON figures to FILE")
+    bn.set_defaults(func=cmd_bench)
     return ap
 
 

@@ -1,0 +1,175 @@
+"""``companion bench``: controller step latency, the scipy reference, batch throughput, memory.
+
+Everything is measured in one run on the figure-8 scenario (Table 2, 60 s, 1,200 steps):
+
+* ``step_us``: wall time of ``controller.step`` for each registered controller alone (no
+  avoidance layer, no supervisor), every step of one episode after a warm-up episode;
+* ``stack_step_us``: the same for the standard stack (:func:`companion.control.make_controller`:
+  avoidance layer and safety supervisor around the controller);
+* ``scipy_step_us``: the LQR step with ``lqr.solver = "scipy"`` (scipy's
+  ``solve_discrete_are``), and ``speedup_vs_scipy`` = its median over the compiled one;
+* ``batch_steps_per_s``: controller steps per second of :func:`companion.sim.batch.run_batch`
+  over N figure-8 episodes with different seeds, sensor noise and starts;
+* ``compile_s`` / ``warmup_s``: first LQR step in a fresh process with an empty numba cache
+  (compilation) and with the cache filled (loading);
+* ``peak_rss_mb``: peak resident memory of this process and of its worker processes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import platform
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from typing import Callable
+
+import numpy as np
+
+from companion.control import CONTROLLERS, make_controller
+from companion.control.base import Command, Controller, Observation, Pose
+from companion.params import Params
+from companion.sim.batch import EpisodeSpec, default_workers, run_batch
+from companion.sim.episode import SensorNoise, run_episode
+from companion.sim.scenario import Scenario, load_scenario
+
+
+class Timed:
+    """A controller wrapper that records the wall time of every ``step``."""
+
+    def __init__(self, inner: Controller):
+        self.inner = inner
+        self.seconds: list[float] = []
+
+    def reset(self) -> None:
+        self.inner.reset()
+
+    def step(self, obs: Observation) -> Command:
+        t = time.perf_counter()
+        cmd = self.inner.step(obs)
+        self.seconds.append(time.perf_counter() - t)
+        return cmd
+
+    def applied(self, cmd: Command) -> None:
+        self.inner.applied(cmd)
+
+
+def latency_us(make: Callable[[], Controller], sc: Scenario, params: Params,
+               duration: float) -> dict:
+    """Median and 99th percentile (us) of the step time over one episode, after a warm-up
+    episode."""
+    timed = Timed(make())
+    run_episode(timed, sc.person, params, duration)
+    timed.seconds.clear()
+    run_episode(timed, sc.person, params, duration)
+    us = np.asarray(timed.seconds) * 1e6
+    return {"median": float(np.median(us)), "p99": float(np.percentile(us, 99))}
+
+
+def batch_specs(sc: Scenario, n: int, duration: float) -> list[EpisodeSpec]:
+    """``n`` figure-8 episodes: seed i, sensor noise, starts up to 0.5 m off the slot."""
+    rng = np.random.default_rng(0)
+    noise = SensorNoise(position=0.02, heading=0.02, speed=0.02, turn_rate=0.02)
+    h0 = sc.person.state(0.0)
+    specs = []
+    for i in range(n):
+        dx, dy, dth = rng.uniform(-0.5, 0.5, 3)
+        start = Pose(h0.x + 0.75 + dx, h0.y - 1.0 + dy, h0.theta + dth)
+        specs.append(EpisodeSpec("lqr", sc.person, sc.params, duration, start=start, seed=i,
+                                 noise=noise))
+    return specs
+
+
+_FIRST_STEP = """
+import time
+t = time.perf_counter()
+from companion.control import LqrController, Observation, PersonState, Pose
+from companion.params import Params
+LqrController(Params()).step(Observation(0.0, Pose(0.0, -1.0, 0.0),
+                                         PersonState(0.0, 0.0, 0.0, 1.0, 0.0)))
+print(time.perf_counter() - t)
+"""
+
+
+def first_step_seconds() -> tuple[float, float]:
+    """Seconds to the first LQR step in a fresh process: with an empty numba cache
+    (compilation), then with the cache it left (loading)."""
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        runs = [float(subprocess.run([sys.executable, "-c", _FIRST_STEP], env=env,
+                                     check=True, capture_output=True, text=True).stdout)
+                for _ in range(2)]
+    return runs[0], runs[1]
+
+
+def peak_rss_mb() -> float:
+    """Peak resident set size (MB) of this process and of its largest finished child."""
+    own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    return max(own, children) / 1024.0   # Linux reports kB
+
+
+def run(episodes: int = 1000, duration: float = 60.0, workers: int | None = None,
+        compile_time: bool = True, progress: Callable[[str], None] = lambda s: None) -> dict:
+    """All figures of ``companion bench`` as a JSON-ready dict (see the module docstring)."""
+    sc = load_scenario("figure8")
+    result: dict = {"machine": {"cpu": platform.processor() or platform.machine(),
+                                "cpus": os.cpu_count(), "python": platform.python_version()},
+                    "scenario": sc.name, "episode_steps": int(round(duration / sc.params.dt))}
+    if compile_time:
+        progress("first step in a fresh process (numba compile, then cached)")
+        result["compile_s"], result["warmup_s"] = first_step_seconds()
+    result["step_us"], result["stack_step_us"] = {}, {}
+    for name, entry in CONTROLLERS.items():
+        progress(f"step latency: {name}")
+        params = entry.adjust(sc.params)
+        result["step_us"][name] = latency_us(lambda: entry.factory(params), sc, params,
+                                             duration)
+        result["stack_step_us"][name] = latency_us(lambda: make_controller(name, sc.params),
+                                                   sc, sc.params, duration)
+    progress("step latency: lqr with scipy's solve_discrete_are")
+    scipy_params = sc.params.replace(lqr=dataclasses.replace(sc.params.lqr, solver="scipy"))
+    result["scipy_step_us"] = latency_us(lambda: CONTROLLERS["lqr"].factory(scipy_params), sc,
+                                         scipy_params, duration)
+    result["speedup_vs_scipy"] = (result["scipy_step_us"]["median"]
+                                  / result["step_us"]["lqr"]["median"])
+    workers = workers or default_workers()
+    specs = batch_specs(sc, episodes, duration)
+    progress(f"batch: {episodes} episodes of {result['episode_steps']} steps")
+    t = time.perf_counter()
+    metrics = run_batch(specs, workers)
+    seconds = time.perf_counter() - t
+    steps = sum(m["steps"] for m in metrics)
+    result["batch"] = {"episodes": episodes, "workers": workers,
+                       "seconds": seconds, "all_finite": all(m["finite"] for m in metrics)}
+    result["batch_steps_per_s"] = steps / seconds
+    result["peak_rss_mb"] = peak_rss_mb()
+    return result
+
+
+def text(result: dict) -> str:
+    """Human-readable table of :func:`run`'s result."""
+    lines = [f"companion bench on {result['machine']['cpu']} ({result['machine']['cpus']} CPUs, "
+             f"Python {result['machine']['python']}), {result['scenario']} scenario, "
+             f"{result['episode_steps']} steps per episode"]
+    lines.append(f"  {'controller step (us)':28s} {'median':>9s} {'p99':>9s}"
+                 f" {'stack median':>13s} {'stack p99':>10s}")
+    for name, s in result["step_us"].items():
+        st = result["stack_step_us"][name]
+        lines.append(f"  {name:28s} {s['median']:9.1f} {s['p99']:9.1f} {st['median']:13.1f}"
+                     f" {st['p99']:10.1f}")
+    sc = result["scipy_step_us"]
+    lines.append(f"  {'lqr, scipy solve_discrete_are':28s} {sc['median']:9.1f} {sc['p99']:9.1f}")
+    lines.append(f"  speed-up of the lqr step over scipy: {result['speedup_vs_scipy']:.0f}x")
+    b = result["batch"]
+    lines.append(f"  batch: {b['episodes']} episodes, {b['workers']} workers, "
+                 f"{b['seconds']:.1f} s: {result['batch_steps_per_s']:,.0f} controller steps/s "
+                 f"(standard stack; all finite: {b['all_finite']})")
+    if "compile_s" in result:
+        lines.append(f"  first lqr step in a fresh process: {result['compile_s']:.1f} s with an "
+                     f"empty numba cache, {result['warmup_s']:.2f} s cached")
+    lines.append(f"  peak memory: {result['peak_rss_mb']:.0f} MB")
+    return "\n".join(lines)
