@@ -9,11 +9,13 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
 from companion.control import (Command, Observation, PersonState, Pose, SafetySupervisor,
                                make_controller)
 from companion.kinematics import unicycle_step
 from companion.control.supervisor import (braking_speed, limit_rate, obstacle_clearances,
+                                          rollout_margins, speed_up_distance,
                                           predict)
 from companion.obstacles import Circle, Wall
 from companion.params import Params
@@ -83,6 +85,43 @@ def test_predict_follows_the_unicycle_arc():
     q = predict(h, math.pi / 0.5)            # half a circle of radius 2
     assert (q.x, q.y) == pytest.approx((0.0, 4.0), abs=1e-9)
     assert predict(PersonState(1.0, 2.0, 0.0, 1.0, 0.0), 2.0).x == pytest.approx(3.0)
+
+
+def reference_margins(robot, current, targets, person, obstacles, p=P, horizon=1.2, step=0.1):
+    """What :func:`rollout_margins` computes, written with numpy over the candidates."""
+    s = p.supervisor
+    rate = min(s.accel_max, s.decel_max)
+    n = len(targets)
+    x, y, th = np.full(n, robot.x), np.full(n, robot.y), np.full(n, robot.theta)
+    margin = np.full(n, np.inf)
+    for k in range(1, int(round(horizon / step)) + 1):
+        t = k * step
+        v = current[0] + np.clip(targets[:, 0] - current[0], -rate * t, rate * t)
+        w = current[1] + np.clip(targets[:, 1] - current[1], -s.angular_accel_max * t,
+                                 s.angular_accel_max * t)
+        x = x + step * v * np.cos(th + 0.5 * step * w)
+        y = y + step * v * np.sin(th + 0.5 * step * w)
+        th = th + step * w
+        h = predict(person, t)
+        extra = speed_up_distance(person.v, s.person_accel, t)
+        hx, hy = h.x + extra * math.cos(person.theta), h.y + extra * math.sin(person.theta)
+        margin = np.minimum(margin, np.hypot(x - hx, y - hy) - s.protective_distance)
+        margin = np.minimum(margin, obstacle_clearances(x, y, obstacles, p.robot.radius))
+    return margin
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.tuples(*[st.floats(-3, 3)] * 3), st.tuples(st.floats(-1.5, 1.5), st.floats(-1, 1)),
+       st.tuples(*[st.floats(-3, 3)] * 3, st.floats(-0.5, 2.0), st.floats(-2, 2)),
+       st.lists(st.tuples(st.floats(-3, 3), st.floats(-3, 3), st.floats(0, 1)), max_size=3),
+       st.lists(st.tuples(*[st.floats(-3, 3)] * 4), max_size=2))
+def test_compiled_rollout_equals_the_numpy_reference(pose, current, person, circles, walls):
+    robot, h = Pose(*pose), PersonState(*person)
+    obstacles = tuple(Circle(*c) for c in circles) + tuple(Wall(*w) for w in walls)
+    targets = np.random.default_rng(0).uniform(-1.5, 1.5, (36, 2))
+    np.testing.assert_allclose(rollout_margins(robot, current, targets, h, obstacles, P),
+                               reference_margins(robot, current, targets, h, obstacles),
+                               rtol=1e-12, atol=1e-12)
 
 
 def test_obstacle_clearances_for_circles_and_walls():

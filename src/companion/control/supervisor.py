@@ -45,6 +45,7 @@ import math
 from typing import Sequence
 
 import numpy as np
+from numba import njit
 
 from companion.control.base import Command, Controller, Observation, PersonState, Pose
 from companion.control.safety import clip_to, obstacle_normals, person_normal, speed_bound
@@ -100,17 +101,22 @@ def braking_speed(gap: float, decel: float, dt: float) -> float:
     return math.sqrt(ad * ad + 2.0 * decel * gap) - ad
 
 
+def predict_pose(x: float, y: float, theta: float, v: float, omega: float, tau: float
+                 ) -> tuple[float, float, float]:
+    """Pose ``tau`` seconds on at constant speed ``v`` and turn rate ``omega`` (exact unicycle
+    arc); the heading is not wrapped. Plain math: also compiled, as :data:`_predict_pose_nb`."""
+    th = theta + omega * tau
+    if abs(omega * tau) < 1e-9:
+        s = v * tau
+        return x + s * math.cos(theta), y + s * math.sin(theta), th
+    r = v / omega
+    return x + r * (math.sin(th) - math.sin(theta)), y - r * (math.cos(th) - math.cos(theta)), th
+
+
 def predict(person: PersonState, tau: float) -> PersonState:
     """The person ``tau`` seconds on at constant speed and turn rate (exact unicycle arc)."""
-    th = person.theta + person.omega * tau
-    if abs(person.omega * tau) < 1e-9:
-        s = person.v * tau
-        return PersonState(person.x + s * math.cos(person.theta),
-                           person.y + s * math.sin(person.theta), th, person.v, person.omega)
-    r = person.v / person.omega
-    return PersonState(person.x + r * (math.sin(th) - math.sin(person.theta)),
-                       person.y - r * (math.cos(th) - math.cos(person.theta)),
-                       math.remainder(th, 2.0 * math.pi), person.v, person.omega)
+    x, y, th = predict_pose(person.x, person.y, person.theta, person.v, person.omega, tau)
+    return PersonState(x, y, math.remainder(th, 2.0 * math.pi), person.v, person.omega)
 
 
 def valid_fraction(scan: Scan) -> float:
@@ -162,6 +168,56 @@ def speed_up_distance(v: float, accel: float, t: float) -> float:
     return 0.5 * accel * t_up * t_up + accel * t_up * (t - t_up)
 
 
+_predict_pose_nb = njit(cache=True, error_model="numpy")(predict_pose)
+_speed_up_distance_nb = njit(cache=True, error_model="numpy")(speed_up_distance)
+
+
+@njit(cache=True, error_model="numpy")
+def _rollout_nb(x0, y0, th0, v0, w0, targets, px, py, pth, pv, pw, person_accel, protective,
+                circles, walls, radius, v_rate, w_rate, step, n_steps, out):
+    """Body of :func:`rollout_margins`; ``circles`` rows (x, y, r), ``walls`` rows
+    (x0, y0, x1, y1); ``out`` receives the margins."""
+    hx = np.empty(n_steps)
+    hy = np.empty(n_steps)
+    for k in range(n_steps):
+        t = (k + 1) * step
+        qx, qy, _ = _predict_pose_nb(px, py, pth, pv, pw, t)
+        extra = _speed_up_distance_nb(pv, person_accel, t)
+        hx[k] = qx + extra * math.cos(pth)
+        hy[k] = qy + extra * math.sin(pth)
+    for i in range(targets.shape[0]):
+        x, y, th = x0, y0, th0
+        margin = np.inf
+        for k in range(n_steps):
+            t = (k + 1) * step
+            v = v0 + min(max(targets[i, 0] - v0, -v_rate * t), v_rate * t)
+            w = w0 + min(max(targets[i, 1] - w0, -w_rate * t), w_rate * t)
+            x = x + step * v * math.cos(th + 0.5 * step * w)
+            y = y + step * v * math.sin(th + 0.5 * step * w)
+            th = th + step * w
+            margin = min(margin, math.hypot(x - hx[k], y - hy[k]) - protective)
+            for c in range(circles.shape[0]):
+                gap = math.hypot(x - circles[c, 0], y - circles[c, 1]) - circles[c, 2]
+                margin = min(margin, gap - radius)
+            for j in range(walls.shape[0]):
+                ax, ay = walls[j, 0], walls[j, 1]
+                ex, ey = walls[j, 2] - ax, walls[j, 3] - ay
+                length2 = ex * ex + ey * ey
+                u = 0.0
+                if length2 > 0.0:
+                    u = min(max(((x - ax) * ex + (y - ay) * ey) / length2, 0.0), 1.0)
+                margin = min(margin, math.hypot(x - ax - u * ex, y - ay - u * ey) - radius)
+        out[i] = margin
+
+
+def obstacle_arrays(obstacles: Sequence[Obstacle]) -> tuple[np.ndarray, np.ndarray]:
+    """Circles as rows (x, y, r) and walls as rows (x0, y0, x1, y1)."""
+    circles = [(o.x, o.y, o.radius) for o in obstacles if isinstance(o, Circle)]
+    walls = [(o.x0, o.y0, o.x1, o.y1) for o in obstacles if not isinstance(o, Circle)]
+    return (np.array(circles, dtype=float).reshape(-1, 3),
+            np.array(walls, dtype=float).reshape(-1, 4))
+
+
 def rollout_margins(robot: Pose, current: tuple[float, float], targets: np.ndarray,
                     person: PersonState, obstacles: Sequence[Obstacle], params: Params,
                     horizon: float = 1.2, step: float = 0.1) -> np.ndarray:
@@ -170,28 +226,20 @@ def rollout_margins(robot: Pose, current: tuple[float, float], targets: np.ndarr
     The robot's velocity ramps from ``current`` to the target at the acceleration limits and
     the unicycle is integrated over ``horizon`` s; the person moves at constant speed and
     turn rate (:func:`predict`) plus the distance it could gain by speeding up at
-    ``person_accel`` along its heading (:func:`speed_up_distance`). The margin is the smallest, over the horizon, of the
-    distance to the person minus ``protective_distance`` and the clearance to the obstacles.
+    ``person_accel`` along its heading (:func:`speed_up_distance`). The margin is the
+    smallest, over the horizon, of the distance to the person minus ``protective_distance``
+    and the clearance to the obstacles (:func:`obstacle_clearances`). Compiled: about 2 us
+    for the 36 candidates of :func:`evasive_target` without obstacles.
     """
     s = params.supervisor
-    v_rate = min(s.accel_max, s.decel_max)
-    n = len(targets)
-    x, y, th = np.full(n, robot.x), np.full(n, robot.y), np.full(n, robot.theta)
-    margin = np.full(n, np.inf)
-    for k in range(1, int(round(horizon / step)) + 1):
-        t = k * step
-        v = current[0] + np.clip(targets[:, 0] - current[0], -v_rate * t, v_rate * t)
-        w = current[1] + np.clip(targets[:, 1] - current[1], -s.angular_accel_max * t,
-                                 s.angular_accel_max * t)
-        x = x + step * v * np.cos(th + 0.5 * step * w)
-        y = y + step * v * np.sin(th + 0.5 * step * w)
-        th = th + step * w
-        h = predict(person, t)
-        extra = speed_up_distance(person.v, s.person_accel, t)
-        hx, hy = h.x + extra * math.cos(person.theta), h.y + extra * math.sin(person.theta)
-        margin = np.minimum(margin, np.hypot(x - hx, y - hy) - s.protective_distance)
-        margin = np.minimum(margin, obstacle_clearances(x, y, obstacles, params.robot.radius))
-    return margin
+    circles, walls = obstacle_arrays(obstacles)
+    out = np.empty(len(targets))
+    _rollout_nb(robot.x, robot.y, robot.theta, float(current[0]), float(current[1]),
+                np.ascontiguousarray(targets, dtype=float), person.x, person.y, person.theta,
+                person.v, person.omega, s.person_accel, s.protective_distance, circles, walls,
+                params.robot.radius, min(s.accel_max, s.decel_max), s.angular_accel_max, step,
+                int(round(horizon / step)), out)
+    return out
 
 
 def evasive_target(robot: Pose, current: tuple[float, float], nominal: tuple[float, float],
@@ -205,7 +253,8 @@ def evasive_target(robot: Pose, current: tuple[float, float], nominal: tuple[flo
     closest to the nominal (``change``: distance in units of v_max and omega_max) wins.
     """
     r = params.robot
-    grid = np.array([(a * r.v_max, b * r.omega_max) for a in _V_GRID for b in _W_GRID])
+    grid = np.column_stack([np.repeat(_V_GRID, _W_GRID.size) * r.v_max,
+                            np.tile(_W_GRID, _V_GRID.size) * r.omega_max])
     targets = np.vstack([np.array(nominal), grid])
     margin = rollout_margins(robot, current, targets, person, obstacles, params)
     if margin[0] >= needed:
