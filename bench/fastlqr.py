@@ -9,7 +9,7 @@ For each discretisation ('euler', the default, and 'zoh') and the same random op
   mean over REPEAT calls, then median / p99 over the points;
 * ``lqr_gain_nb`` called from Python, one timed call at a time (numba dispatch included);
 * the Python wrapper ``lqr_gain(chi, u, w, params)`` (argument unpacking, arrays, dispatch);
-* the scipy path ``LqrController(params).gain(chi, u, w)``;
+* the scipy path ``LqrController(params).gain(chi, u, w)`` with ``lqr.solver = "scipy"``;
 
 and the speed-up of each over scipy (ratio of medians), plus the SDA iteration counts and the
 largest relative difference between the compiled and the scipy gains on these points. BLAS is
@@ -86,7 +86,7 @@ def main() -> None:
         t = time.perf_counter()
         fastlqr.lqr_gain_nb(*gain_args(*points[0], params, k))
         first = time.perf_counter() - t
-        controller = LqrController(params)
+        controller = LqrController(params.replace(lqr=LqrParams(discretization=method, solver="scipy")))
 
         # Keep the points where scipy finds a gain (all, for walking persons) and record the
         # SDA iterations and the difference of the gains.

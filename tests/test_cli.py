@@ -198,7 +198,8 @@ def test_bench_json_has_the_documented_keys(tmp_path, capsys):
     # scipy's Riccati solver is much slower than the compiled one, even on a busy machine
     assert result["speedup_vs_scipy"] > 5.0
     assert result["batch"]["episodes"] == 3 and result["batch"]["all_finite"]
-    assert result["batch_steps_per_s"] > 0.0 and result["peak_rss_mb"] > 10.0
+    assert result["batch_steps_per_s"] > 0.0 and result["batch_noisy_steps_per_s"] > 0.0
+    assert result["stack_batch_steps_per_s"] > 0.0 and result["peak_rss_mb"] > 10.0
 
 
 @pytest.mark.parametrize("argv, message", [

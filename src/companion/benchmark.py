@@ -8,10 +8,15 @@ Everything is measured in one run on the figure-8 scenario (Table 2, 60 s, 1,200
   avoidance layer and safety supervisor around the controller);
 * ``scipy_step_us``: the LQR step with ``lqr.solver = "scipy"`` (scipy's
   ``solve_discrete_are``), and ``speedup_vs_scipy`` = its median over the compiled one;
-* ``batch_steps_per_s``: controller steps per second of :func:`companion.sim.batch.run_batch`
-  over N figure-8 episodes with different seeds, sensor noise and starts;
+* ``batch_steps_per_s``: controller steps per second of the compiled batch
+  (:mod:`companion.sim.lqr_batch`) over N figure-8 episodes (the scenario as defined: exact
+  person observations) from different starts; ``batch_noisy_steps_per_s``: the same with
+  sensor noise and a different seed per episode; ``stack_batch_steps_per_s``: the standard
+  stack in worker processes (:func:`companion.sim.batch.run_batch`, backend "processes") over
+  N / 10 noisy episodes;
 * ``compile_s`` / ``warmup_s``: first LQR step in a fresh process with an empty numba cache
-  (compilation) and with the cache filled (loading);
+  (compilation) and with the cache filled (loading); ``batch_compile_s`` /
+  ``batch_warmup_s``: the same for a first small batch;
 * ``peak_rss_mb``: peak resident memory of this process and of its worker processes.
 """
 
@@ -69,17 +74,21 @@ def latency_us(make: Callable[[], Controller], sc: Scenario, params: Params,
     return {"median": float(np.median(us)), "p99": float(np.percentile(us, 99))}
 
 
-def batch_specs(sc: Scenario, n: int, duration: float) -> list[EpisodeSpec]:
-    """``n`` figure-8 episodes: seed i, sensor noise, starts up to 0.5 m off the slot."""
+def batch_specs(sc: Scenario, n: int, duration: float, noisy: bool = False,
+                stack: bool = False) -> list[EpisodeSpec]:
+    """``n`` figure-8 episodes of the bare LQR (or the standard stack) from starts up to 0.5 m
+    and 0.5 rad off the slot; with ``noisy``, sensor noise (0.02 in SI units on every
+    observed value) and seed i for episode i."""
     rng = np.random.default_rng(0)
-    noise = SensorNoise(position=0.02, heading=0.02, speed=0.02, turn_rate=0.02)
+    noise = SensorNoise(position=0.02, heading=0.02, speed=0.02, turn_rate=0.02) if noisy \
+        else SensorNoise()
     h0 = sc.person.state(0.0)
     specs = []
     for i in range(n):
         dx, dy, dth = rng.uniform(-0.5, 0.5, 3)
         start = Pose(h0.x + 0.75 + dx, h0.y - 1.0 + dy, h0.theta + dth)
         specs.append(EpisodeSpec("lqr", sc.person, sc.params, duration, start=start, seed=i,
-                                 noise=noise))
+                                 noise=noise, stack=stack))
     return specs
 
 
@@ -93,16 +102,38 @@ LqrController(Params()).step(Observation(0.0, Pose(0.0, -1.0, 0.0),
 print(time.perf_counter() - t)
 """
 
+_FIRST_BATCH = """
+import time
+t = time.perf_counter()
+from companion.benchmark import batch_specs
+from companion.sim.lqr_batch import run_lqr_batch
+from companion.sim.scenario import load_scenario
+run_lqr_batch(batch_specs(load_scenario("figure8"), 2, 1.0, noisy=True))
+print(time.perf_counter() - t)
+"""
 
-def first_step_seconds() -> tuple[float, float]:
-    """Seconds to the first LQR step in a fresh process: with an empty numba cache
+
+def first_call_seconds(script: str) -> tuple[float, float]:
+    """Seconds ``script`` reports in a fresh process: with an empty numba cache
     (compilation), then with the cache it left (loading)."""
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache)
-        runs = [float(subprocess.run([sys.executable, "-c", _FIRST_STEP], env=env,
+        runs = [float(subprocess.run([sys.executable, "-c", script], env=env,
                                      check=True, capture_output=True, text=True).stdout)
                 for _ in range(2)]
     return runs[0], runs[1]
+
+
+def cpu_name() -> str:
+    """The CPU model (from /proc/cpuinfo on Linux), else the machine type."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
 
 
 def peak_rss_mb() -> float:
@@ -116,12 +147,14 @@ def run(episodes: int = 1000, duration: float = 60.0, workers: int | None = None
         compile_time: bool = True, progress: Callable[[str], None] = lambda s: None) -> dict:
     """All figures of ``companion bench`` as a JSON-ready dict (see the module docstring)."""
     sc = load_scenario("figure8")
-    result: dict = {"machine": {"cpu": platform.processor() or platform.machine(),
+    result: dict = {"machine": {"cpu": cpu_name(),
                                 "cpus": os.cpu_count(), "python": platform.python_version()},
                     "scenario": sc.name, "episode_steps": int(round(duration / sc.params.dt))}
     if compile_time:
-        progress("first step in a fresh process (numba compile, then cached)")
-        result["compile_s"], result["warmup_s"] = first_step_seconds()
+        progress("first LQR step in a fresh process (numba compile, then cached)")
+        result["compile_s"], result["warmup_s"] = first_call_seconds(_FIRST_STEP)
+        progress("first batch in a fresh process (numba compile, then cached)")
+        result["batch_compile_s"], result["batch_warmup_s"] = first_call_seconds(_FIRST_BATCH)
     result["step_us"], result["stack_step_us"] = {}, {}
     for name, entry in CONTROLLERS.items():
         progress(f"step latency: {name}")
@@ -137,15 +170,25 @@ def run(episodes: int = 1000, duration: float = 60.0, workers: int | None = None
     result["speedup_vs_scipy"] = (result["scipy_step_us"]["median"]
                                   / result["step_us"]["lqr"]["median"])
     workers = workers or default_workers()
-    specs = batch_specs(sc, episodes, duration)
-    progress(f"batch: {episodes} episodes of {result['episode_steps']} steps")
+    run_batch(batch_specs(sc, 2, 1.0, noisy=True), workers)          # load the kernels
+    for key, noisy in (("batch_steps_per_s", False), ("batch_noisy_steps_per_s", True)):
+        progress(f"compiled batch: {episodes} episodes of {result['episode_steps']} steps"
+                 + (", sensor noise" if noisy else ""))
+        specs = batch_specs(sc, episodes, duration, noisy=noisy)
+        t = time.perf_counter()
+        metrics = run_batch(specs, workers, backend="compiled")
+        seconds = time.perf_counter() - t
+        result[key] = sum(m["steps"] for m in metrics) / seconds
+        if not noisy:
+            result["batch"] = {"episodes": episodes, "workers": workers, "seconds": seconds,
+                               "all_finite": all(m["finite"] for m in metrics)}
+    stack_episodes = max(1, episodes // 10)
+    progress(f"standard stack in worker processes: {stack_episodes} episodes")
+    specs = batch_specs(sc, stack_episodes, duration, noisy=True, stack=True)
     t = time.perf_counter()
-    metrics = run_batch(specs, workers)
-    seconds = time.perf_counter() - t
-    steps = sum(m["steps"] for m in metrics)
-    result["batch"] = {"episodes": episodes, "workers": workers,
-                       "seconds": seconds, "all_finite": all(m["finite"] for m in metrics)}
-    result["batch_steps_per_s"] = steps / seconds
+    metrics = run_batch(specs, workers, backend="processes")
+    result["stack_batch_steps_per_s"] = sum(m["steps"] for m in metrics) / (
+        time.perf_counter() - t)
     result["peak_rss_mb"] = peak_rss_mb()
     return result
 
@@ -165,11 +208,14 @@ def text(result: dict) -> str:
     lines.append(f"  {'lqr, scipy solve_discrete_are':28s} {sc['median']:9.1f} {sc['p99']:9.1f}")
     lines.append(f"  speed-up of the lqr step over scipy: {result['speedup_vs_scipy']:.0f}x")
     b = result["batch"]
-    lines.append(f"  batch: {b['episodes']} episodes, {b['workers']} workers, "
-                 f"{b['seconds']:.1f} s: {result['batch_steps_per_s']:,.0f} controller steps/s "
-                 f"(standard stack; all finite: {b['all_finite']})")
+    lines.append(f"  compiled batch, {b['episodes']} episodes, {b['workers']} threads: "
+                 f"{result['batch_steps_per_s']:,.0f} controller steps/s (exact observations), "
+                 f"{result['batch_noisy_steps_per_s']:,.0f} with sensor noise")
+    lines.append(f"  standard stack in worker processes: {result['stack_batch_steps_per_s']:,.0f}"
+                 f" controller steps/s")
     if "compile_s" in result:
         lines.append(f"  first lqr step in a fresh process: {result['compile_s']:.1f} s with an "
-                     f"empty numba cache, {result['warmup_s']:.2f} s cached")
+                     f"empty numba cache, {result['warmup_s']:.2f} s cached; first batch: "
+                     f"{result['batch_compile_s']:.1f} s, {result['batch_warmup_s']:.2f} s cached")
     lines.append(f"  peak memory: {result['peak_rss_mb']:.0f} MB")
     return "\n".join(lines)

@@ -27,8 +27,10 @@ import math
 import numpy as np
 from numba import njit
 
-#: SDA stops when the largest entry of the update of P is below this times the largest of P.
-DARE_TOL = 1e-14
+#: SDA stops when the largest entry of the update of P is below this times the largest of P;
+#: the convergence is quadratic, so the iterate is then within ~1e-14 and the Newton polish
+#: (one step) finishes it. (1e-14 here costs one more doubling for the same result.)
+DARE_TOL = 1e-8
 #: SDA iteration cap: each iteration doubles the horizon; convergent cases need < 40.
 DARE_MAX_ITER = 100
 #: Smith doubling in a Newton step stops when its update is below this times the correction
@@ -566,8 +568,8 @@ def solve_dare_nb(a, b, q, r, p_out):
     monotonically to ``P``. When (A, B) is stabilisable and (Q, A) detectable the
     convergence is quadratic, the error shrinking like ``rho(A - BK)^(2^(k+1))``. The
     iteration stops when the largest entry of the update of ``H`` is at most ``DARE_TOL``
-    (1e-14) times the largest entry of ``H``: the updates shrink quadratically, so the next
-    one would be far below the rounding level. Typically 9-12 iterations; close to the
+    (1e-8) times the largest entry of ``H``: the updates shrink quadratically, so the next
+    one would be ~1e-14, which the Newton polish removes. Typically 8-11 iterations; close to the
     stabilisability boundary (closed-loop spectral radius ``1 - eps``) about
     ``log2(37 / eps)``, e.g. ~35 for ``eps = 1e-9``.
 
@@ -701,19 +703,34 @@ def lqr_gain_nb(rho, alpha, beta, v, omega, v_h, omega_h, d, dt, zoh, rho_min,
         ``A_bar - B_bar K`` has spectral radius >= 1 - 1e-9 (the test of
         :func:`companion.lqr.dlqr`; see :func:`spectral_radius_below`).
     """
-    nx, nu = 5, 2
+    return lqr_gain_p_nb(rho, alpha, beta, v, omega, v_h, omega_h, d, dt, zoh, rho_min,
+                         q_diag, r_diag, k_out, np.empty((5, 5)))
+
+
+@njit(**_JIT)
+def augmented_model_nb(rho, alpha, beta, v, omega, v_h, omega_h, d, dt, zoh, rho_min):
+    """``(A_bar, B_bar)``: the augmented companion model linearised at ``(chi, u, w)`` (rho
+    floored at ``rho_min``), discretised (zero-order hold or forward Euler)."""
     jx, ju = jacobians_nb(max(rho, rho_min), alpha, beta, v, omega, v_h, omega_h, d)
-    a, b = _discretize(jx, ju, dt, zoh, 3, 2, nx)
-    a_bar, b_bar = augment_nb(a, b)
+    a, b = _discretize(jx, ju, dt, zoh, 3, 2, 5)
+    return augment_nb(a, b)
+
+
+@njit(**_JIT)
+def lqr_gain_p_nb(rho, alpha, beta, v, omega, v_h, omega_h, d, dt, zoh, rho_min,
+                  q_diag, r_diag, k_out, p_out):
+    """:func:`lqr_gain_nb` that also returns the Riccati solution in ``p_out`` (5, 5)."""
+    nx, nu = 5, 2
+    a_bar, b_bar = augmented_model_nb(rho, alpha, beta, v, omega, v_h, omega_h, d, dt, zoh,
+                                      rho_min)
     q = np.zeros((nx, nx))
     for i in range(nx):
         q[i, i] = q_diag[i]
     r = np.zeros((nu, nu))
     for i in range(nu):
         r[i, i] = r_diag[i]
-    p = np.empty((nx, nx))
-    ok, _ = _sda(a_bar, b_bar, q, r, p, nx, nu)
-    if not (ok and _gain(a_bar, b_bar, r, p, k_out, nx, nu)):
+    ok, _ = _sda(a_bar, b_bar, q, r, p_out, nx, nu)
+    if not (ok and _gain(a_bar, b_bar, r, p_out, k_out, nx, nu)):
         return False
     if not _max_abs(k_out, nu, nx) < np.inf:
         return False
@@ -763,9 +780,9 @@ def lqr_gain(chi, u, w, params) -> np.ndarray:
 
 
 # -- the whole controller step ---------------------------------------------------------------
-# Compiled twins of companion.kinematics.wrap_pi / wrap_2pi, companion.model.relative_state /
-# slot_reference and the body of LqrController.step: the same floating-point operations in the
-# same order. Results agree to rounding, not always bit for bit (Python's math.hypot is its own
+# Compiled twins of companion.kinematics.wrap_pi / wrap_2pi and companion.model.relative_state /
+# slot_reference (used by companion.control.lqr_lanes): the same floating-point operations in
+# the same order. Results agree to rounding, not always bit for bit (Python's math.hypot is its own
 # correctly rounded algorithm, numba's is not); tests/test_fastlqr.py checks them.
 
 _TWO_PI = 2.0 * math.pi
@@ -821,14 +838,15 @@ def slot_reference_nb(v_h, omega_h, rho_d, alpha_d, d):
     return wrap_pi_nb(-theta_rev), -along, omega_h
 
 
-#: Layout of the ``config`` array of :func:`lqr_step_nb` (see :func:`lqr_step_config`).
+#: Layout of the ``config`` array of :func:`lqr_step_nb` and of a ``config`` row of
+#: :mod:`companion.control.lqr_lanes` (see :func:`lqr_step_config`).
 CONFIG_FIELDS = ("d", "dt", "zoh", "rho_min", "rho_d", "alpha_d", "geometric",
                  "measured", "clip_rho", "clip_alpha", "clip_beta", "v_max", "omega_max")
 
 
 def lqr_step_config(params) -> np.ndarray:
-    """The parameters :func:`lqr_step_nb` needs, as a float array in :data:`CONFIG_FIELDS`
-    order (flags as 0.0 / 1.0)."""
+    """The parameters :func:`lqr_step_nb` and an LQR lane need, as a float array in
+    :data:`CONFIG_FIELDS` order (flags as 0.0 / 1.0)."""
     lqr, f, r = params.lqr, params.formation, params.robot
     return np.array([r.d, params.dt, lqr.discretization == "zoh", lqr.rho_min, f.distance,
                      f.bearing, lqr.feedforward == "geometric", lqr.linearize_at == "measured",
@@ -898,3 +916,211 @@ def lqr_step_nb(rx, ry, rth, hx, hy, hth, hv, hw, config, q_diag, r_diag, memory
     memory[0] = v - v_d
     memory[1] = om - omega_d
     return v, om, v_d, omega_d, beta_d
+
+
+# -- many Riccati equations at once (batch simulation) ----------------------------------------
+# Arrays of shape (rows, cols, L) hold one matrix per lane (episode) with the lane index last
+# and contiguous, so that every loop below runs over lanes innermost and compiles to SIMD
+# instructions. The method is Newton's (Hewer's) iteration warm-started from each lane's
+# previous Riccati solution (the operating point moves little in one period), with the Stein
+# equations solved by Smith's doubling: matrix products only, no pivoting, no branches per
+# lane. Lanes without a warm start or where the iteration fails take the scalar cold path
+# (lqr_gain_p_nb).
+
+#: A lane's Newton iteration stops after a correction below this times its P: the error left
+#: is then of the order of its square (quadratic convergence), ~1e-12 and less.
+LANES_DONE = 1e-9
+LANES_MAX_STEPS = 5
+#: The Stein equation of a Newton step is solved to this relative accuracy, so that the
+#: truncation (this times the correction) stays below the Newton error.
+LANES_SMITH_TOL = 1e-7
+
+
+@njit(**_JIT)
+def _mm_lanes(a, b, out, n, m, lanes):
+    """``out[:, :, e] = a[:, :, e] @ b[:, :, e]`` for every lane ``e``; ``a`` (n, 5, L),
+    ``b`` (5, m, L). The inner dimension is written out, so that each output stays in a
+    register while the lane loop runs on SIMD units."""
+    for i in range(n):
+        for j in range(m):
+            for e in range(lanes):
+                out[i, j, e] = (a[i, 0, e] * b[0, j, e] + a[i, 1, e] * b[1, j, e]
+                                + a[i, 2, e] * b[2, j, e] + a[i, 3, e] * b[3, j, e]
+                                + a[i, 4, e] * b[4, j, e])
+
+
+@njit(**_JIT)
+def _mm_tn_lanes(a, b, out, n, m, lanes):
+    """``out[:, :, e] = a[:, :, e].T @ b[:, :, e]`` for every lane; ``a`` (5, n, L), ``b``
+    (5, m, L)."""
+    for i in range(n):
+        for j in range(m):
+            for e in range(lanes):
+                out[i, j, e] = (a[0, i, e] * b[0, j, e] + a[1, i, e] * b[1, j, e]
+                                + a[2, i, e] * b[2, j, e] + a[3, i, e] * b[3, j, e]
+                                + a[4, i, e] * b[4, j, e])
+
+
+@njit(**_JIT)
+def _gain_lanes(a, b, r_diag, p, k, lanes):
+    """``K = (R + B'PB)^-1 B'PA`` per lane (the 2x2 solve in closed form)."""
+    n, m = b.shape[0], b.shape[1]   # runtime sizes: loops over lanes are the hot ones
+    bt_p = np.empty((m, n, lanes))
+    s = np.empty((m, m, lanes))
+    _mm_tn_lanes(b, p, bt_p, m, n, lanes)
+    _mm_lanes(bt_p, b, s, m, m, lanes)
+    _mm_lanes(bt_p, a, k, m, n, lanes)
+    for e in range(lanes):
+        s00 = s[0, 0, e] + r_diag[0, e]
+        s11 = s[1, 1, e] + r_diag[1, e]
+        s01 = 0.5 * (s[0, 1, e] + s[1, 0, e])
+        det = s00 * s11 - s01 * s01
+        for j in range(n):
+            x0, x1 = k[0, j, e], k[1, j, e]
+            k[0, j, e] = (s11 * x0 - s01 * x1) / det
+            k[1, j, e] = (s00 * x1 - s01 * x0) / det
+
+
+@njit(**_JIT)
+def newton_lanes(a, b, q_diag, r_diag, p, active, lanes, corr):
+    """One Newton (Hewer) step on the Riccati equations of ``lanes`` lanes, in place.
+
+    Parameters
+    ----------
+    a : ndarray, shape (5, 5, L)
+    b : ndarray, shape (5, 2, L)
+    q_diag, r_diag : ndarrays, shapes (5, L) and (2, L)
+    p : ndarray, shape (5, 5, L)
+        Stabilising approximations of the solutions; replaced by the Newton iterates.
+    active : ndarray of bool, shape (L,)
+        Lanes to update (the others are computed but left unchanged).
+    lanes : int
+        Number of lanes in use (``<= L``).
+    corr : ndarray, shape (L,)
+        Receives ``max|correction| / max|P|`` per lane, or ``inf`` where the Stein equation
+        did not converge (closed loop not stable) or a number is not finite.
+    """
+    n = a.shape[0]
+    k = np.empty((2, n, lanes))
+    _gain_lanes(a, b, r_diag, p, k, lanes)
+    ac = np.empty((n, n, lanes))
+    for i in range(n):
+        for j in range(n):
+            for e in range(lanes):
+                ac[i, j, e] = a[i, j, e] - (b[i, 0, e] * k[0, j, e] + b[i, 1, e] * k[1, j, e])
+    tmp = np.empty((n, n, lanes))
+    d = np.empty((n, n, lanes))
+    _mm_lanes(p, ac, tmp, n, n, lanes)
+    _mm_tn_lanes(ac, tmp, d, n, n, lanes)
+    for i in range(n):
+        for j in range(n):
+            for e in range(lanes):
+                krk = r_diag[0, e] * k[0, i, e] * k[0, j, e] + r_diag[1, e] * k[1, i, e] * k[1, j, e]
+                d[i, j, e] += krk - p[i, j, e]
+            if i == j:
+                for e in range(lanes):
+                    d[i, i, e] += q_diag[i, e]
+    # Smith's doubling for D - Ac' D Ac = residual: D += M' D M, M <- M^2.
+    m_pow = ac
+    m_sq = np.empty((n, n, lanes))
+    t = np.empty((n, n, lanes))
+    done = np.zeros(lanes, np.bool_)
+    step = np.empty(lanes)
+    size = np.empty(lanes)
+    for _ in range(DARE_MAX_ITER):
+        _mm_lanes(d, m_pow, tmp, n, n, lanes)
+        _mm_tn_lanes(m_pow, tmp, t, n, n, lanes)
+        step[:] = 0.0
+        size[:] = 0.0
+        for i in range(n):
+            for j in range(n):
+                for e in range(lanes):
+                    # A lane that is done keeps its D: its result must not depend on the
+                    # other lanes of the block (a lane alone gives the same bits).
+                    x = d[i, j, e] if done[e] else d[i, j, e] + t[i, j, e]
+                    d[i, j, e] = x
+                    step[e] = max(step[e], abs(t[i, j, e]))
+                    size[e] = max(size[e], abs(x))
+        all_done = True
+        for e in range(lanes):
+            if not done[e]:
+                if step[e] <= LANES_SMITH_TOL * size[e] or not step[e] < np.inf:
+                    done[e] = True
+                else:
+                    all_done = False
+        if all_done:
+            break
+        _mm_lanes(m_pow, m_pow, m_sq, n, n, lanes)
+        m_pow, m_sq = m_sq, m_pow
+    for e in range(lanes):
+        dmax = 0.0
+        pmax = 0.0
+        total = 0.0
+        for i in range(n):
+            for j in range(i, n):
+                x = 0.5 * (d[i, j, e] + d[j, i, e])
+                y = p[i, j, e] + x
+                dmax = max(dmax, abs(x))
+                pmax = max(pmax, abs(y))
+                total += y
+        if not done[e] or not abs(total) < np.inf:
+            corr[e] = np.inf
+            continue
+        corr[e] = dmax / pmax if pmax > 0.0 else dmax
+        if active[e]:
+            for i in range(n):
+                for j in range(i, n):
+                    x = p[i, j, e] + 0.5 * (d[i, j, e] + d[j, i, e])
+                    p[i, j, e] = x
+                    p[j, i, e] = x
+
+
+@njit(**_JIT)
+def stable_lanes(a, b, k, lanes, ok):
+    """Whether each lane's closed loop ``A - B K`` has spectral radius below
+    ``1 - RADIUS_MARGIN``, as :func:`spectral_radius_below` decides it: the squaring shortcut
+    for all lanes at once, the eigenvalues for the lanes it cannot settle. ``a`` (5, 5, L),
+    ``b`` (5, 2, L), ``k`` (2, 5, L); ``ok`` (L,) receives the answers."""
+    n = a.shape[0]
+    x = np.empty((n, n, lanes))
+    y = np.empty((n, n, lanes))
+    for i in range(n):
+        for j in range(n):
+            for e in range(lanes):
+                x[i, j, e] = a[i, j, e] - (b[i, 0, e] * k[0, j, e] + b[i, 1, e] * k[1, j, e])
+    closed = x.copy()
+    pending = np.zeros(lanes, np.bool_)
+    nrm = np.empty(lanes)
+    row = np.empty(lanes)
+    for e in range(lanes):
+        ok[e] = False
+        pending[e] = _max_abs(closed[:, :, e].copy(), n, n) < np.inf
+    scalar = pending.copy()      # lanes to settle one by one if the shortcut does not
+    if 1.0 - RADIUS_MARGIN > _SHORTCUT_RADIUS:
+        for _ in range(12):
+            _mm_lanes(x, x, y, n, n, lanes)
+            nrm[:] = 0.0
+            for i in range(n):
+                row[:] = 0.0
+                for j in range(n):
+                    for e in range(lanes):
+                        row[e] += abs(y[i, j, e])
+                for e in range(lanes):
+                    nrm[e] = max(nrm[e], row[e])
+            left = False
+            for e in range(lanes):
+                if pending[e]:
+                    if nrm[e] < 0.5:
+                        ok[e] = True
+                        pending[e] = False
+                        scalar[e] = False
+                    elif not nrm[e] < 1e3:
+                        pending[e] = False
+                    else:
+                        left = True
+            if not left:
+                break
+            x, y = y, x
+    for e in range(lanes):
+        if scalar[e]:
+            ok[e] = _radius_below(closed[:, :, e].copy(), 1.0 - RADIUS_MARGIN, n)

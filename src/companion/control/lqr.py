@@ -81,6 +81,11 @@ class LqrController:
         self._ref: tuple[float, float, float] | None = None   # (v_d, omega_d, beta_d)
 
     @property
+    def rest_gain(self) -> np.ndarray:
+        """Fallback gain while no stabilising gain has been found (a copy)."""
+        return self._rest_gain.copy()
+
+    @property
     def u_e_prev(self) -> tuple[float, float]:
         """``u_e(k-1)``: the last applied input minus its feedforward."""
         return float(self._memory[0]), float(self._memory[1])

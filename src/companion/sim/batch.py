@@ -1,15 +1,19 @@
 """Many independent episodes, metrics only (Monte-Carlo evaluation and tuning).
 
-Each :class:`EpisodeSpec` names everything one episode needs (controller, person, parameters,
-start, seed, noise, obstacles). :func:`run_batch` runs the episodes in worker processes with
-the single-episode simulator (:func:`companion.sim.episode.run_episode` and the standard
-controller stack of :func:`companion.control.make_controller`) and returns one metrics dict
-per episode, in the order of the specs. A worker keeps one episode's log at a time and
-returns only its metrics (about 1 kB), so memory does not grow with the number of episodes.
+Each :class:`EpisodeSpec` names everything one episode needs (controller, whether the
+standard stack wraps it, person, parameters, start, seed, sensor noise, obstacles).
+:func:`run_batch` returns one metrics dict (:func:`companion.metrics.compute`) per episode, in
+the order of the specs, from one of two back ends:
 
-Because the workers run the single-episode code, the results are those of
-:func:`run_one` in this process (``tests/sim/test_batch.py``). Throughput and how it scales
-with the number of workers are measured by ``companion bench`` (docs/performance.md).
+* compiled (:mod:`companion.sim.lqr_batch`): the bare LQR-family controllers without
+  obstacles, all episodes as lanes of one vectorised simulation;
+* processes: anything, with the single-episode simulator
+  (:func:`companion.sim.episode.run_episode`) in worker processes.
+
+Both keep only running sums or one episode's log at a time, so memory does not grow with the
+number of episodes. Both agree with :func:`run_one` in this process to 1e-9
+(``tests/sim/test_batch.py``, ``tests/sim/test_lqr_batch.py``). docs/performance.md has the
+throughput.
 """
 
 from __future__ import annotations
@@ -21,8 +25,8 @@ from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 from companion import metrics
-from companion.control import make_controller
-from companion.control.base import Pose
+from companion.control import CONTROLLERS, make_controller
+from companion.control.base import Controller, Pose
 from companion.errors import ConfigError
 from companion.obstacles import Obstacle
 from companion.params import Params
@@ -42,13 +46,26 @@ class EpisodeSpec:
     seed: int = 0
     noise: SensorNoise = SensorNoise()
     obstacles: tuple[Obstacle, ...] = field(default_factory=tuple)
+    stack: bool = True
+    """True: the standard stack (avoidance layer and safety supervisor around the controller,
+    :func:`companion.control.make_controller`); False: the controller alone."""
+
+
+def controller_of(spec: EpisodeSpec) -> Controller:
+    """The spec's controller: the standard stack, or the registered controller alone."""
+    if spec.stack:
+        return make_controller(spec.controller, spec.params)
+    if spec.controller not in CONTROLLERS:
+        make_controller(spec.controller, spec.params)   # raises ConfigError with a hint
+    entry = CONTROLLERS[spec.controller]
+    return entry.factory(entry.adjust(spec.params))
 
 
 def run_one(spec: EpisodeSpec) -> dict:
-    """Simulate one episode with the standard stack and return its metrics
+    """Simulate one episode with the single-episode simulator and return its metrics
     (:func:`companion.metrics.compute`)."""
-    log = run_episode(make_controller(spec.controller, spec.params), spec.person, spec.params,
-                      spec.duration, start=spec.start, seed=spec.seed, noise=spec.noise,
+    log = run_episode(controller_of(spec), spec.person, spec.params, spec.duration,
+                      start=spec.start, seed=spec.seed, noise=spec.noise,
                       obstacles=spec.obstacles)
     return metrics.compute(log)
 
@@ -59,26 +76,46 @@ def default_workers() -> int:
         (os.cpu_count() or 1)
 
 
+BACKENDS = ("auto", "compiled", "processes")
+
+
 def run_batch(specs: Sequence[EpisodeSpec], workers: int | None = None,
-              progress: Callable[[int], None] | None = None) -> list[dict]:
+              progress: Callable[[int], None] | None = None, backend: str = "auto"
+              ) -> list[dict]:
     """Metrics of every episode in ``specs``, in order.
 
     Parameters
     ----------
     specs : sequence of EpisodeSpec
     workers : int, optional
-        Worker processes (default: :func:`default_workers`); 1 runs in this process.
+        Threads (compiled backend) or worker processes (default: one per CPU); with
+        processes, 1 runs in this process.
     progress : callable, optional
-        Called with the number of episodes finished so far, after each one.
+        Called with the number of episodes finished so far.
+    backend : {"auto", "compiled", "processes"}
+        "compiled": :func:`companion.sim.lqr_batch.run_lqr_batch` (bare LQR-family
+        controllers without obstacles; about 30x faster); "processes": the single-episode
+        simulator in worker processes (anything); "auto": compiled when every spec allows it.
 
     Raises
     ------
     ConfigError
-        If ``workers`` is not a positive integer.
+        If ``workers`` is not a positive integer, ``backend`` is unknown, or "compiled" is
+        asked for a spec it cannot run.
     """
+    from companion.sim import lqr_batch
+
     workers = default_workers() if workers is None else workers
     if not isinstance(workers, int) or workers < 1:
         raise ConfigError(f"workers: expected a positive integer, got {workers!r}")
+    if backend not in BACKENDS:
+        raise ConfigError(f"backend: expected one of {', '.join(BACKENDS)}, got {backend!r}")
+    if backend == "compiled" or (backend == "auto" and specs
+                                 and not any(lqr_batch.unsupported(s) for s in specs)):
+        results = lqr_batch.run_lqr_batch(specs, threads=workers)
+        if progress:
+            progress(len(results))
+        return results
     results: list[dict] = []
     if workers == 1 or len(specs) <= 1:
         for spec in specs:

@@ -1,0 +1,279 @@
+"""The LQR controller step for many lanes (episodes or robots) at once, compiled.
+
+Each lane is one :class:`companion.control.lqr.LqrController`: per sample period its relative
+state, feedforward and linearisation (:func:`_prepare`), its Riccati equation (:func:`_solve`:
+Newton's iteration warm-started from the lane's previous solutions, for all lanes of a block at
+once, vectorised by :func:`companion.fastlqr.newton_lanes`), a stability check
+(:func:`_check`), the cold solver for lanes without a usable warm start (:func:`_cold`), and the
+output (:func:`_control`). :class:`LaneSet` holds the arrays; :func:`step_lanes` runs one
+period.
+
+The batch simulator (:mod:`companion.sim.lqr_batch`) runs sets of many lanes. A lane's result
+does not depend on the other lanes of its set (a set of one gives the same bits). The gain
+of a lane equals that of :meth:`companion.control.lqr.LqrController.gain` (cold doubling at
+every period) to about 1e-12 relative (``tests/sim/test_lqr_batch.py``), so a lane follows
+the single-episode controller to that precision, except in closed loops that amplify such
+differences (docs/performance.md).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from companion.fastlqr import (LANES_DONE, LANES_MAX_STEPS, _gain_lanes, augmented_model_nb,
+                               jacobians_nb, lqr_gain_p_nb, newton_lanes, relative_state_nb,
+                               slot_reference_nb, stable_lanes, wrap_pi_nb)
+
+_NB = {"cache": True, "nogil": True, "error_model": "numpy"}
+
+
+@njit(**_NB)
+def _lane_model(a, b, j, op0, op1, op2, op3, op4, v_h, omega_h, d, dt, zoh, rho_min):
+    """Write lane ``j`` of the block's ``a`` (5, 5, L) and ``b`` (5, 2, L): the augmented
+    model of :func:`companion.fastlqr.augmented_model_nb`."""
+    if zoh:
+        a_bar, b_bar = augmented_model_nb(op0, op1, op2, op3, op4, v_h, omega_h, d, dt, True,
+                                          rho_min)
+        for r in range(5):
+            for c in range(5):
+                a[r, c, j] = a_bar[r, c]
+            for c in range(2):
+                b[r, c, j] = b_bar[r, c]
+        return
+    jx, ju = jacobians_nb(max(op0, rho_min), op1, op2, op3, op4, v_h, omega_h, d)
+    for r in range(5):
+        for c in range(5):
+            a[r, c, j] = 0.0
+        for c in range(2):
+            b[r, c, j] = 0.0
+    for r in range(3):
+        for c in range(3):
+            a[r, c, j] = dt * jx[r, c]
+        a[r, r, j] += 1.0
+        for c in range(2):
+            a[r, 3 + c, j] = b[r, c, j] = dt * ju[r, c]
+    for r in range(2):
+        a[3 + r, 3 + r, j] = 1.0
+        b[3 + r, r, j] = 1.0
+
+
+@njit(**_NB)
+def _prepare(idx, observed, pose, config, mem, ref, err, lin, a, b, warm, active):
+    """Per lane: feedforward, errors, operating point and model from the observed person
+    ``observed[lane]`` (x, y, theta, v, omega) and robot ``pose[lane]`` (x, y, theta)."""
+    block = a.shape[3]
+    for lane in range(idx.size):
+        g = idx[lane]
+        active[lane] = False
+        if g < 0:
+            continue
+        c = config[g]
+        hx, hy, hth = observed[lane, 0], observed[lane, 1], observed[lane, 2]
+        hv, hw = observed[lane, 3], observed[lane, 4]
+        d, rho_d, alpha_d = c[0], c[4], c[5]
+        rho, alpha, beta = relative_state_nb(pose[lane, 0], pose[lane, 1], pose[lane, 2], hx,
+                                             hy, hth, d)
+        if c[6] != 0.0:
+            beta_d, v_d, omega_d = slot_reference_nb(hv, hw, rho_d, alpha_d, d)
+        else:
+            beta_d, v_d, omega_d = 0.0, hv, hw
+        ref[lane, 0], ref[lane, 1], ref[lane, 2] = v_d, omega_d, beta_d
+        err[lane, 0] = rho - rho_d
+        err[lane, 1] = wrap_pi_nb(alpha - alpha_d)
+        err[lane, 2] = wrap_pi_nb(beta - beta_d)
+        if c[7] != 0.0:
+            op = (rho, alpha, beta, v_d + mem[lane, 0], omega_d + mem[lane, 1])
+        else:
+            op = (rho_d, alpha_d, beta_d, v_d, omega_d)
+        lin[lane, 0], lin[lane, 1], lin[lane, 2], lin[lane, 3], lin[lane, 4] = op
+        lin[lane, 5], lin[lane, 6] = hv, hw
+        blk, j = lane // block, lane % block
+        _lane_model(a[blk], b[blk], j, op[0], op[1], op[2], op[3], op[4], hv, hw, d, c[1],
+                    c[2] != 0.0, c[3])
+        active[lane] = warm[lane]
+
+
+@njit(**_NB)
+def _solve(a, b, qd, rd, p, p_prev, history, k, active, corr):
+    """Newton steps on the warm (``active``) lanes of every block, from the solution of the
+    previous period, or, after two solved periods in a row (``history`` 2), from the linear
+    extrapolation ``2 P(k-1) - P(k-2)``. ``corr`` ends 0 where a lane converged and inf
+    elsewhere; ``k`` gets each lane's gain from its ``p``."""
+    blocks, block = a.shape[0], a.shape[3]
+    converged = np.zeros(block, np.bool_)
+    step_corr = np.empty(block)
+    for blk in range(blocks):
+        act = active[blk * block:(blk + 1) * block]
+        converged[:] = False
+        for j in range(block):
+            if not act[j]:
+                continue
+            extrapolate = history[blk * block + j] >= 2
+            for r in range(5):
+                for c in range(5):
+                    x = p[blk, r, c, j]
+                    if extrapolate:
+                        p[blk, r, c, j] = 2.0 * x - p_prev[blk, r, c, j]
+                    p_prev[blk, r, c, j] = x
+        for _ in range(LANES_MAX_STEPS):
+            newton_lanes(a[blk], b[blk], qd[blk], rd[blk], p[blk], act, block, step_corr)
+            left = False
+            for j in range(block):
+                if act[j]:
+                    if step_corr[j] <= LANES_DONE:
+                        act[j] = False
+                        converged[j] = True
+                    elif not step_corr[j] < np.inf:
+                        act[j] = False
+                    else:
+                        left = True
+            if not left:
+                break
+        for j in range(block):
+            corr[blk, j] = 0.0 if converged[j] else np.inf
+        _gain_lanes(a[blk], b[blk], rd[blk], p[blk], k[blk], block)
+
+
+@njit(**_NB)
+def _check(idx, a, b, k, corr, warm, history, gain, has_gain, need_cold):
+    """Accept each warm lane's gain if it converged and stabilises; else flag a cold solve."""
+    blocks, block = a.shape[0], a.shape[3]
+    stable = np.empty(block, np.bool_)
+    for blk in range(blocks):
+        stable_lanes(a[blk], b[blk], k[blk], block, stable)
+        for j in range(block):
+            lane = blk * block + j
+            need_cold[lane] = False
+            if idx[lane] < 0:
+                continue
+            if warm[lane] and corr[blk, j] == 0.0 and stable[j]:
+                for r in range(2):
+                    for c in range(5):
+                        gain[lane, r, c] = k[blk, r, c, j]
+                has_gain[lane] = True
+                history[lane] = min(history[lane] + 1, 2)
+            else:
+                need_cold[lane] = True
+
+
+@njit(**_NB)
+def _control(idx, config, gain, mem, ref, err, xi, vw):
+    """Per lane: ``u = u_d + u_e(k-1) - K xi`` clipped to the input limits, into ``vw``;
+    ``mem`` becomes ``u_e(k)`` of the saturated output and ``xi`` the augmented state."""
+    for lane in range(idx.size):
+        g = idx[lane]
+        if g < 0:
+            continue
+        c = config[g]
+        xi[lane, 0] = min(max(err[lane, 0], -c[8]), c[8])
+        xi[lane, 1] = min(max(err[lane, 1], -c[9]), c[9])
+        xi[lane, 2] = min(max(err[lane, 2], -c[10]), c[10])
+        xi[lane, 3] = mem[lane, 0]
+        xi[lane, 4] = mem[lane, 1]
+        du_v = 0.0
+        du_w = 0.0
+        for j in range(5):
+            du_v += gain[lane, 0, j] * xi[lane, j]
+            du_w += gain[lane, 1, j] * xi[lane, j]
+        v_d, omega_d = ref[lane, 0], ref[lane, 1]
+        v = min(max(v_d + mem[lane, 0] - du_v, -c[11]), c[11])
+        om = min(max(omega_d + mem[lane, 1] - du_w, -c[12]), c[12])
+        mem[lane, 0] = v - v_d
+        mem[lane, 1] = om - omega_d
+        vw[lane, 0] = v
+        vw[lane, 1] = om
+
+
+class LaneSet:
+    """The arrays of a set of lanes.
+
+    Parameters
+    ----------
+    idx : ndarray of int, shape (n,)
+        Row of each lane in the per-lane parameter arrays (``config``, ``q_diag``,
+        ``r_diag``, ``rest_gain``); -1 marks padding. ``n`` must be a multiple of ``block``.
+    block : int
+        Lanes solved together (SIMD width and cache use; 1 for a single controller).
+    q_diag, r_diag : ndarrays, shapes (rows, 5) and (rows, 2)
+    """
+
+    def __init__(self, idx: np.ndarray, block: int, q_diag: np.ndarray, r_diag: np.ndarray):
+        n = idx.size
+        if n % block:
+            raise ValueError(f"LaneSet: {n} lanes are not a whole number of blocks of {block}")
+        blocks = n // block
+        self.idx = idx
+        self.block = block
+        self.a = np.zeros((blocks, 5, 5, block))
+        self.b = np.zeros((blocks, 5, 2, block))
+        self.p = np.zeros((blocks, 5, 5, block))
+        self.p_prev = np.zeros((blocks, 5, 5, block))
+        self.k = np.zeros((blocks, 2, 5, block))
+        self.qd = np.ones((blocks, 5, block))
+        self.rd = np.ones((blocks, 2, block))
+        for lane in np.flatnonzero(idx >= 0):
+            blk, j = divmod(int(lane), block)
+            self.qd[blk, :, j] = q_diag[idx[lane]]
+            self.rd[blk, :, j] = r_diag[idx[lane]]
+        self.corr = np.zeros((blocks, block))
+        self.history = np.zeros(n, np.int64)   # solved periods in a row (up to 2)
+        self.warm = np.zeros(n, np.bool_)      # p holds the previous period's solution
+        self.active = np.zeros(n, np.bool_)
+        self.need_cold = np.zeros(n, np.bool_)
+        self.has_gain = np.zeros(n, np.bool_)
+        self.gain = np.zeros((n, 2, 5))
+        self.mem = np.zeros((n, 2))            # u_e(k-1)
+        self.ref = np.zeros((n, 3))            # v_d, omega_d, beta_d
+        self.err = np.zeros((n, 3))            # rho_e, alpha_e, beta_e
+        self.lin = np.zeros((n, 7))            # operating point of the gain
+        self.xi = np.zeros((n, 5))
+        self.vw = np.zeros((n, 2))             # output v, omega
+        self.observed = np.zeros((n, 5))       # person x, y, theta, v, omega (input)
+        self.pose = np.zeros((n, 3))           # robot x, y, theta (input)
+
+    def reset(self) -> None:
+        """Forget every lane's history (a new episode)."""
+        for name in ("history", "warm", "has_gain", "mem", "p", "p_prev"):
+            getattr(self, name)[...] = 0
+
+
+def _cold(lanes: LaneSet, config: np.ndarray, q_diag: np.ndarray, r_diag: np.ndarray,
+          rest_gain: np.ndarray) -> None:
+    """The scalar cold solver for the lanes :func:`_check` flagged; a lane without any
+    stabilising gain keeps its last one (or gets ``rest_gain``)."""
+    if not lanes.need_cold.any():
+        return
+    k_cold = np.empty((2, 5))
+    p_cold = np.empty((5, 5))
+    for lane in np.flatnonzero(lanes.need_cold):
+        g = lanes.idx[lane]
+        c, op = config[g], lanes.lin[lane]
+        blk, j = divmod(int(lane), lanes.block)
+        if lqr_gain_p_nb(op[0], op[1], op[2], op[3], op[4], op[5], op[6], c[0], c[1],
+                         c[2] != 0.0, c[3], q_diag[g], r_diag[g], k_cold, p_cold):
+            lanes.gain[lane] = k_cold
+            lanes.has_gain[lane] = True
+            lanes.p[blk, :, :, j] = p_cold
+            lanes.warm[lane] = True
+            lanes.history[lane] = 1
+        else:
+            lanes.warm[lane] = False
+            lanes.history[lane] = 0
+            if not lanes.has_gain[lane]:
+                lanes.gain[lane] = rest_gain[g]
+                lanes.has_gain[lane] = True
+
+
+def step_lanes(lanes: LaneSet, config: np.ndarray, q_diag: np.ndarray, r_diag: np.ndarray,
+               rest_gain: np.ndarray) -> None:
+    """One controller period of every lane: from ``lanes.observed`` and ``lanes.pose`` to
+    ``lanes.vw`` (see the module docstring). ``config`` rows are
+    :func:`companion.fastlqr.lqr_step_config`."""
+    L = lanes
+    _prepare(L.idx, L.observed, L.pose, config, L.mem, L.ref, L.err, L.lin, L.a, L.b, L.warm,
+             L.active)
+    _solve(L.a, L.b, L.qd, L.rd, L.p, L.p_prev, L.history, L.k, L.active, L.corr)
+    _check(L.idx, L.a, L.b, L.k, L.corr, L.warm, L.history, L.gain, L.has_gain, L.need_cold)
+    _cold(L, config, q_diag, r_diag, rest_gain)
+    _control(L.idx, config, L.gain, L.mem, L.ref, L.err, L.xi, L.vw)

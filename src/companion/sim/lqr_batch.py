@@ -1,0 +1,291 @@
+"""Compiled batch simulation of LQR episodes: many at once, metrics only.
+
+What one episode is: exactly :func:`companion.sim.episode.run_episode` with the bare LQR
+controller (``lqr``, ``lqr-paper`` or ``lqr-tuned`` of :data:`companion.control.CONTROLLERS`,
+without the avoidance layer and the safety supervisor), no obstacles, ground-truth or noisy
+person observations; and its metrics are those of :func:`companion.metrics.compute`. The
+results agree with the single-episode simulator to 1e-9 (``tests/sim/test_lqr_batch.py``).
+
+How: episodes are lanes of :mod:`companion.control.lqr_lanes`, the same code the
+single-episode controller runs as a set of one lane, so each lane reproduces its single
+episode bit for bit. The Riccati equations of a block of 64 lanes are solved together (SIMD);
+the lanes are split between threads (one per CPU; the kernels release the GIL). Only running
+sums for the metrics are kept, so memory does not grow with the episode length, and episodes
+are processed in chunks of 2,048, so it does not grow with their number.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from concurrent.futures import ThreadPoolExecutor
+from typing import Sequence
+
+import numpy as np
+from numba import njit
+
+from companion.control import CONTROLLERS
+from companion.control.lqr import LqrController
+from companion.errors import ConfigError
+from companion.control.lqr_lanes import LaneSet, step_lanes
+from companion.fastlqr import lqr_step_config, relative_state_nb, slot_reference_nb
+from companion.metrics import Tolerance
+from companion.model import robot_pose_at
+from companion.params import Params
+from companion.sim.episode import SensorNoise
+
+#: Controllers the compiled batch runs (bare, see the module docstring).
+LQR_FAMILY = ("lqr", "lqr-paper", "lqr-tuned")
+#: Lanes per block: one block is one thread's unit of work.
+BLOCK = 64
+#: Episodes per chunk (bounds the memory of the per-step person noise).
+CHUNK = 2048
+
+_TWO_PI = 2.0 * math.pi
+
+# Columns of the per-lane accumulator array.
+_SQ_RHO, _SQ_ALPHA, _SQ_BETA, _SQ_V, _SQ_W, _MIN_DIST, _LAST_OUT, _FIN_RHO, _FIN_ALPHA, \
+    _FIN_BETA, _FINITE = range(11)
+_N_ACC = 11
+
+
+@njit(cache=True, error_model="numpy")
+def unicycle_step_nb(x, y, theta, v, omega, dt):
+    """:func:`companion.kinematics.unicycle_step`, compiled."""
+    half = 0.5 * omega * dt
+    if abs(half) < 1e-6:
+        sinc = 1.0 - half * half / 6.0
+    else:
+        sinc = math.sin(half) / half
+    dist = v * dt * sinc
+    mid = theta + half
+    return x + dist * math.cos(mid), y + dist * math.sin(mid), theta + omega * dt
+
+
+@njit(cache=True, error_model="numpy")
+def remainder_2pi_nb(theta):
+    """``math.remainder(theta, 2*pi)`` (exact; round half to even)."""
+    n = np.rint(theta / _TWO_PI)
+    r = theta - n * _TWO_PI
+    # theta / 2pi rounds; correct the quotient where that moved r outside [-pi, pi].
+    if r > math.pi:
+        r -= _TWO_PI
+    elif r < -math.pi:
+        r += _TWO_PI
+    return r
+
+
+@njit(cache=True, error_model="numpy")
+def _wrap_metric(a):
+    """:func:`companion.metrics.wrap`: to [-pi, pi) by Python's float modulo."""
+    return (a + math.pi) % _TWO_PI - math.pi
+
+
+_NB = {"cache": True, "nogil": True, "error_model": "numpy"}
+
+
+@njit(**_NB)
+def _observe(step, idx, person, pidx, noise, noisy, observed):
+    """What each lane's controller observes at ``step``: the person, plus sensor noise."""
+    for lane in range(idx.size):
+        g = idx[lane]
+        if g < 0:
+            continue
+        for i in range(5):
+            observed[lane, i] = person[pidx[g], step, i]
+        if noisy[g]:
+            for i in range(5):
+                observed[lane, i] += noise[g, step, i]
+
+
+@njit(**_NB)
+def _account(step, dt, idx, person, pidx, config, vw, pose, tol, acc):
+    """Per lane: the metrics' running sums against the true person, then the plant."""
+    for lane in range(idx.size):
+        g = idx[lane]
+        if g < 0:
+            continue
+        c = config[g]
+        v, om = vw[lane, 0], vw[lane, 1]
+        h = person[pidx[g], step]
+        x, y, th = pose[lane, 0], pose[lane, 1], pose[lane, 2]
+        rho, alpha, beta = relative_state_nb(x, y, th, h[0], h[1], h[2], c[0])
+        beta_ref, _, _ = slot_reference_nb(h[3], h[4], c[4], c[5], c[0])
+        e_rho = rho - c[4]
+        e_alpha = _wrap_metric(alpha - c[5])
+        e_beta = _wrap_metric(beta)
+        e_ref = _wrap_metric(beta - beta_ref)
+        row = acc[g]
+        row[_SQ_RHO] += e_rho * e_rho
+        row[_SQ_ALPHA] += e_alpha * e_alpha
+        row[_SQ_BETA] += e_beta * e_beta
+        row[_SQ_V] += (v - h[3]) * (v - h[3])
+        row[_SQ_W] += (om - h[4]) * (om - h[4])
+        row[_MIN_DIST] = min(row[_MIN_DIST], math.hypot(x - h[0], y - h[1]))
+        if not (abs(e_rho) < tol[0] and abs(e_alpha) < tol[1] and abs(e_ref) < tol[2]):
+            row[_LAST_OUT] = step
+        row[_FIN_RHO], row[_FIN_ALPHA], row[_FIN_BETA] = abs(e_rho), abs(e_alpha), abs(e_ref)
+        if not (math.isfinite(v) and math.isfinite(om)):
+            row[_FINITE] = 0.0
+        x, y, th = unicycle_step_nb(x, y, th, v, om, dt)
+        pose[lane, 0], pose[lane, 1], pose[lane, 2] = x, y, remainder_2pi_nb(th)
+
+
+def unsupported(spec) -> str:
+    """Why the compiled batch cannot run ``spec`` (empty string if it can)."""
+    if spec.controller not in LQR_FAMILY:
+        return f"controller {spec.controller!r} is not one of {', '.join(LQR_FAMILY)}"
+    if spec.stack:
+        return "the standard stack (avoidance layer and supervisor) is not compiled"
+    if spec.obstacles:
+        return "obstacles are not supported"
+    return ""
+
+
+def _person_states(person, steps: int, dt: float) -> np.ndarray:
+    out = np.empty((steps, 5))
+    for k in range(steps):
+        h = person.state(k * dt)
+        out[k] = (h.x, h.y, h.theta, h.v, h.omega)
+    return out
+
+
+def _metrics(row: np.ndarray, steps: int, dt: float) -> dict:
+    """The keys of :func:`companion.metrics.compute` from one lane's accumulators."""
+    rms = [math.sqrt(row[i] / steps) for i in (_SQ_RHO, _SQ_ALPHA, _SQ_BETA, _SQ_V, _SQ_W)]
+    last_out = int(row[_LAST_OUT])
+    settle = None if last_out == steps - 1 else (last_out + 1) * dt
+    finite = bool(row[_FINITE]) and math.isfinite(rms[0]) and math.isfinite(rms[1])
+    return {
+        "rmse_rho_m": rms[0], "rmse_alpha_rad": rms[1], "rmse_beta_rad": rms[2],
+        "rmsv_v_mps": rms[3], "rmsv_omega_radps": rms[4],
+        "min_person_distance_m": float(row[_MIN_DIST]),
+        "settling_time_s": settle,
+        "final_abs_error": {"rho_m": float(row[_FIN_RHO]), "alpha_rad": float(row[_FIN_ALPHA]),
+                            "beta_rad": float(row[_FIN_BETA])},
+        "duration_s": (steps - 1) * dt + (1 * dt - 0 * dt) if steps > 1 else 0.0,
+        "steps": steps,
+        "min_obstacle_clearance_m": None, "obstacle_collisions": 0,
+        "share_ok": 1.0, "share_degraded": 0.0, "share_stopped": 0.0,
+        "finite": finite,
+    }
+
+
+def run_lqr_batch(specs: Sequence, tol: Tolerance = Tolerance(), threads: int | None = None
+                  ) -> list[dict]:
+    """Metrics of every episode in ``specs`` (:class:`companion.sim.batch.EpisodeSpec` with
+    ``stack=False``, an LQR-family controller and no obstacles), in order.
+
+    Parameters
+    ----------
+    specs : sequence of EpisodeSpec
+    tol : Tolerance
+        Of the settling time, as in :func:`companion.metrics.compute`.
+    threads : int, optional
+        Threads that share the lanes (default: one per CPU this process may use).
+
+    Raises
+    ------
+    ConfigError
+        If a spec is not supported (see :func:`unsupported`), naming its index.
+    """
+    for i, spec in enumerate(specs):
+        reason = unsupported(spec)
+        if reason:
+            raise ConfigError(f"episode {i}: the compiled batch cannot run it: {reason}")
+    threads = threads or default_threads()
+    out: list[dict | None] = [None] * len(specs)
+    groups: dict[tuple[int, float], list[int]] = {}
+    for i, spec in enumerate(specs):
+        dt = spec.params.dt
+        groups.setdefault((int(round(spec.duration / dt)), dt), []).append(i)
+    tolerance = np.array([tol.rho, tol.alpha, tol.beta])
+    for (steps, dt), members in groups.items():
+        for c0 in range(0, len(members), CHUNK):
+            chunk = members[c0:c0 + CHUNK]
+            rows = _run_chunk([specs[i] for i in chunk], steps, dt, tolerance, threads)
+            for i, row in zip(chunk, rows):
+                out[i] = _metrics(row, steps, dt)
+    return out  # type: ignore[return-value]
+
+
+def default_threads() -> int:
+    """One thread per CPU this process may use."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else \
+        (os.cpu_count() or 1)
+
+
+def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads: int
+               ) -> np.ndarray:
+    n = len(specs)
+    persons: dict[int, int] = {}
+    tables = []
+    pidx = np.empty(n, np.int64)
+    start = np.empty((n, 3))
+    config = np.empty((n, 13))
+    q_diag = np.empty((n, 5))
+    r_diag = np.empty((n, 2))
+    rest_gain = np.empty((n, 2, 5))
+    noisy = np.zeros(n, np.bool_)
+    noise = np.zeros((n, steps if any(s.noise != SensorNoise() for s in specs) else 1, 5))
+    rest_cache: dict[Params, np.ndarray] = {}
+    for e, spec in enumerate(specs):
+        params = CONTROLLERS[spec.controller].adjust(spec.params)
+        key = id(spec.person)
+        if key not in persons:
+            persons[key] = len(tables)
+            tables.append(_person_states(spec.person, steps, dt))
+        pidx[e] = persons[key]
+        if spec.start is None:
+            h0 = spec.person.state(0.0)
+            f = params.formation
+            start[e] = robot_pose_at(f.distance, f.bearing, 0.0, h0.x, h0.y, h0.theta,
+                                     params.robot.d)
+        else:
+            start[e] = (spec.start.x, spec.start.y, spec.start.theta)
+        config[e] = lqr_step_config(params)
+        q_diag[e] = params.lqr.q
+        r_diag[e] = params.lqr.r
+        if params not in rest_cache:
+            rest_cache[params] = LqrController(params).rest_gain
+        rest_gain[e] = rest_cache[params]
+        if spec.noise != SensorNoise():
+            noisy[e] = True
+            sn = spec.noise
+            noise[e] = np.random.default_rng(spec.seed).normal(size=(steps, 5)) * np.array(
+                [sn.position, sn.position, sn.heading, sn.speed, sn.turn_rate])
+    person = np.stack(tables)
+    acc = np.zeros((n, _N_ACC))
+    acc[:, _MIN_DIST] = np.inf
+    acc[:, _LAST_OUT] = -1.0
+    acc[:, _FINITE] = 1.0
+    shared = (person, pidx, noise, noisy, config, q_diag, r_diag, rest_gain, tol, acc)
+    sets = []
+    for part in np.array_split(np.arange(n), min(threads, n)):
+        lanes = LaneSet(_padded(part), BLOCK, q_diag, r_diag)
+        lanes.pose[:part.size] = start[part]
+        sets.append(lanes)
+    if len(sets) == 1:
+        _drive(sets[0], steps, dt, shared)
+    else:
+        with ThreadPoolExecutor(max_workers=len(sets)) as pool:
+            for future in [pool.submit(_drive, lanes, steps, dt, shared) for lanes in sets]:
+                future.result()
+    return acc
+
+
+def _padded(part: np.ndarray) -> np.ndarray:
+    """Episode indices padded with -1 to a whole number of blocks."""
+    size = -(-part.size // BLOCK) * BLOCK
+    out = np.full(size, -1, np.int64)
+    out[:part.size] = part
+    return out
+
+
+def _drive(lanes: LaneSet, steps: int, dt: float, shared: tuple) -> None:
+    """Run one thread's lanes through every period (the kernels release the GIL)."""
+    person, pidx, noise, noisy, config, q_diag, r_diag, rest_gain, tol, acc = shared
+    for step in range(steps):
+        _observe(step, lanes.idx, person, pidx, noise, noisy, lanes.observed)
+        step_lanes(lanes, config, q_diag, r_diag, rest_gain)
+        _account(step, dt, lanes.idx, person, pidx, config, lanes.vw, lanes.pose, tol, acc)
