@@ -2,7 +2,7 @@
 
     python bench/batch_memory.py [--episodes 10000] [--duration 60] [--noisy]
 
-Runs the compiled batch (bare LQR, :mod:`companion.sim.lqr_batch`) and prints the episodes,
+Runs the compiled batch (bare LQR, :mod:`companion.sim.fast_batch`) and prints the episodes,
 controller steps, wall time, throughput and the peak resident memory of the process
 (docs/performance.md).
 """

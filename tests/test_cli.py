@@ -199,6 +199,7 @@ def test_bench_json_has_the_documented_keys(tmp_path, capsys):
     assert result["speedup_vs_scipy"] > 5.0
     assert result["batch"]["episodes"] == 3 and result["batch"]["all_finite"]
     assert result["batch_steps_per_s"] > 0.0 and result["batch_noisy_steps_per_s"] > 0.0
+    assert set(result["batch_steps_per_s_by_controller"]) == {"lqr", "pid", "vsm", "ic"}
     assert result["stack_batch_steps_per_s"] > 0.0 and result["peak_rss_mb"] > 10.0
 
 

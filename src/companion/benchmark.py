@@ -9,9 +9,10 @@ Everything is measured in one run on the figure-8 scenario (Table 2, 60 s, 1,200
 * ``scipy_step_us``: the LQR step with ``lqr.solver = "scipy"`` (scipy's
   ``solve_discrete_are``), and ``speedup_vs_scipy`` = its median over the compiled one;
 * ``batch_steps_per_s``: controller steps per second of the compiled batch
-  (:mod:`companion.sim.lqr_batch`) over N figure-8 episodes (the scenario as defined: exact
-  person observations) from different starts; ``batch_noisy_steps_per_s``: the same with
-  sensor noise and a different seed per episode; ``stack_batch_steps_per_s``: the standard
+  (:mod:`companion.sim.fast_batch`) over N figure-8 episodes of the LQR (the scenario as
+  defined: exact person observations) from different starts;
+  ``batch_steps_per_s_by_controller``: the same for lqr, pid, vsm and ic;
+  ``batch_noisy_steps_per_s``: the LQR with sensor noise and a different seed per episode; ``stack_batch_steps_per_s``: the standard
   stack in worker processes (:func:`companion.sim.batch.run_batch`, backend "processes") over
   N / 10 noisy episodes;
 * ``compile_s`` / ``warmup_s``: first LQR step in a fresh process with an empty numba cache
@@ -75,10 +76,10 @@ def latency_us(make: Callable[[], Controller], sc: Scenario, params: Params,
 
 
 def batch_specs(sc: Scenario, n: int, duration: float, noisy: bool = False,
-                stack: bool = False) -> list[EpisodeSpec]:
-    """``n`` figure-8 episodes of the bare LQR (or the standard stack) from starts up to 0.5 m
-    and 0.5 rad off the slot; with ``noisy``, sensor noise (0.02 in SI units on every
-    observed value) and seed i for episode i."""
+                stack: bool = False, controller: str = "lqr") -> list[EpisodeSpec]:
+    """``n`` figure-8 episodes of the bare ``controller`` (or the standard stack) from starts
+    up to 0.5 m and 0.5 rad off the slot; with ``noisy``, sensor noise (0.02 in SI units on
+    every observed value) and seed i for episode i."""
     rng = np.random.default_rng(0)
     noise = SensorNoise(position=0.02, heading=0.02, speed=0.02, turn_rate=0.02) if noisy \
         else SensorNoise()
@@ -87,8 +88,8 @@ def batch_specs(sc: Scenario, n: int, duration: float, noisy: bool = False,
     for i in range(n):
         dx, dy, dth = rng.uniform(-0.5, 0.5, 3)
         start = Pose(h0.x + 0.75 + dx, h0.y - 1.0 + dy, h0.theta + dth)
-        specs.append(EpisodeSpec("lqr", sc.person, sc.params, duration, start=start, seed=i,
-                                 noise=noise, stack=stack))
+        specs.append(EpisodeSpec(controller, sc.person, sc.params, duration, start=start,
+                                 seed=i, noise=noise, stack=stack))
     return specs
 
 
@@ -106,9 +107,9 @@ _FIRST_BATCH = """
 import time
 t = time.perf_counter()
 from companion.benchmark import batch_specs
-from companion.sim.lqr_batch import run_lqr_batch
+from companion.sim.fast_batch import run_fast_batch
 from companion.sim.scenario import load_scenario
-run_lqr_batch(batch_specs(load_scenario("figure8"), 2, 1.0, noisy=True))
+run_fast_batch(batch_specs(load_scenario("figure8"), 2, 1.0, noisy=True))
 print(time.perf_counter() - t)
 """
 
@@ -171,15 +172,22 @@ def run(episodes: int = 1000, duration: float = 60.0, workers: int | None = None
                                   / result["step_us"]["lqr"]["median"])
     workers = workers or default_workers()
     run_batch(batch_specs(sc, 2, 1.0, noisy=True), workers)          # load the kernels
-    for key, noisy in (("batch_steps_per_s", False), ("batch_noisy_steps_per_s", True)):
-        progress(f"compiled batch: {episodes} episodes of {result['episode_steps']} steps"
-                 + (", sensor noise" if noisy else ""))
-        specs = batch_specs(sc, episodes, duration, noisy=noisy)
+    result["batch_steps_per_s_by_controller"] = {}
+    for name, noisy in (("lqr", False), ("lqr", True), ("pid", False), ("vsm", False),
+                        ("ic", False)):
+        progress(f"compiled batch: {episodes} episodes of {result['episode_steps']} steps, "
+                 f"{name}" + (", sensor noise" if noisy else ""))
+        specs = batch_specs(sc, episodes, duration, noisy=noisy, controller=name)
         t = time.perf_counter()
         metrics = run_batch(specs, workers, backend="compiled")
         seconds = time.perf_counter() - t
-        result[key] = sum(m["steps"] for m in metrics) / seconds
-        if not noisy:
+        rate = sum(m["steps"] for m in metrics) / seconds
+        if noisy:
+            result["batch_noisy_steps_per_s"] = rate
+            continue
+        result["batch_steps_per_s_by_controller"][name] = rate
+        if name == "lqr":
+            result["batch_steps_per_s"] = rate
             result["batch"] = {"episodes": episodes, "workers": workers, "seconds": seconds,
                                "all_finite": all(m["finite"] for m in metrics)}
     stack_episodes = max(1, episodes // 10)
@@ -209,8 +217,11 @@ def text(result: dict) -> str:
     lines.append(f"  speed-up of the lqr step over scipy: {result['speedup_vs_scipy']:.0f}x")
     b = result["batch"]
     lines.append(f"  compiled batch, {b['episodes']} episodes, {b['workers']} threads: "
-                 f"{result['batch_steps_per_s']:,.0f} controller steps/s (exact observations), "
-                 f"{result['batch_noisy_steps_per_s']:,.0f} with sensor noise")
+                 f"{result['batch_steps_per_s']:,.0f} lqr steps/s (exact observations), "
+                 f"{result['batch_noisy_steps_per_s']:,.0f} with sensor noise; "
+                 + ", ".join(f"{name} {rate:,.0f}" for name, rate
+                             in result["batch_steps_per_s_by_controller"].items()
+                             if name != "lqr"))
     lines.append(f"  standard stack in worker processes: {result['stack_batch_steps_per_s']:,.0f}"
                  f" controller steps/s")
     if "compile_s" in result:

@@ -8,10 +8,10 @@ once, vectorised by :func:`companion.fastlqr.newton_lanes`), a stability check
 output (:func:`_control`). :class:`LaneSet` holds the arrays; :func:`step_lanes` runs one
 period.
 
-The batch simulator (:mod:`companion.sim.lqr_batch`) runs sets of many lanes. A lane's result
+The batch simulator (:mod:`companion.sim.fast_batch`) runs sets of many lanes. A lane's result
 does not depend on the other lanes of its set (a set of one gives the same bits). The gain
 of a lane equals that of :meth:`companion.control.lqr.LqrController.gain` (cold doubling at
-every period) to about 1e-12 relative (``tests/sim/test_lqr_batch.py``), so a lane follows
+every period) to about 1e-12 relative (``tests/sim/test_fast_batch.py``), so a lane follows
 the single-episode controller to that precision, except in closed loops that amplify such
 differences (docs/performance.md).
 """

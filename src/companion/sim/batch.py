@@ -5,14 +5,14 @@ standard stack wraps it, person, parameters, start, seed, sensor noise, obstacle
 :func:`run_batch` returns one metrics dict (:func:`companion.metrics.compute`) per episode, in
 the order of the specs, from one of two back ends:
 
-* compiled (:mod:`companion.sim.lqr_batch`): the bare LQR-family controllers without
+* compiled (:mod:`companion.sim.fast_batch`): the bare LQR-family controllers without
   obstacles, all episodes as lanes of one vectorised simulation;
 * processes: anything, with the single-episode simulator
   (:func:`companion.sim.episode.run_episode`) in worker processes.
 
 Both keep only running sums or one episode's log at a time, so memory does not grow with the
 number of episodes. Both agree with :func:`run_one` in this process to 1e-9
-(``tests/sim/test_batch.py``, ``tests/sim/test_lqr_batch.py``). docs/performance.md has the
+(``tests/sim/test_batch.py``, ``tests/sim/test_fast_batch.py``). docs/performance.md has the
 throughput.
 """
 
@@ -93,7 +93,7 @@ def run_batch(specs: Sequence[EpisodeSpec], workers: int | None = None,
     progress : callable, optional
         Called with the number of episodes finished so far.
     backend : {"auto", "compiled", "processes"}
-        "compiled": :func:`companion.sim.lqr_batch.run_lqr_batch` (bare LQR-family
+        "compiled": :func:`companion.sim.fast_batch.run_fast_batch` (bare LQR-family
         controllers without obstacles; about 30x faster); "processes": the single-episode
         simulator in worker processes (anything); "auto": compiled when every spec allows it.
 
@@ -103,7 +103,7 @@ def run_batch(specs: Sequence[EpisodeSpec], workers: int | None = None,
         If ``workers`` is not a positive integer, ``backend`` is unknown, or "compiled" is
         asked for a spec it cannot run.
     """
-    from companion.sim import lqr_batch
+    from companion.sim import fast_batch
 
     workers = default_workers() if workers is None else workers
     if not isinstance(workers, int) or workers < 1:
@@ -111,8 +111,8 @@ def run_batch(specs: Sequence[EpisodeSpec], workers: int | None = None,
     if backend not in BACKENDS:
         raise ConfigError(f"backend: expected one of {', '.join(BACKENDS)}, got {backend!r}")
     if backend == "compiled" or (backend == "auto" and specs
-                                 and not any(lqr_batch.unsupported(s) for s in specs)):
-        results = lqr_batch.run_lqr_batch(specs, threads=workers)
+                                 and not any(fast_batch.unsupported(s) for s in specs)):
+        results = fast_batch.run_fast_batch(specs, threads=workers)
         if progress:
             progress(len(results))
         return results

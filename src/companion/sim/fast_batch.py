@@ -1,17 +1,18 @@
-"""Compiled batch simulation of LQR episodes: many at once, metrics only.
+"""Compiled batch simulation: many episodes at once, metrics only.
 
-What one episode is: exactly :func:`companion.sim.episode.run_episode` with the bare LQR
-controller (``lqr``, ``lqr-paper`` or ``lqr-tuned`` of :data:`companion.control.CONTROLLERS`,
-without the avoidance layer and the safety supervisor), no obstacles, ground-truth or noisy
-person observations; and its metrics are those of :func:`companion.metrics.compute`. The
-results agree with the single-episode simulator to 1e-9 (``tests/sim/test_lqr_batch.py``).
+What one episode is: exactly :func:`companion.sim.episode.run_episode` with a bare registered
+controller (``lqr``, ``lqr-paper``, ``lqr-tuned``, ``pid``, ``vsm`` or ``ic`` of
+:data:`companion.control.CONTROLLERS`, without the avoidance layer and the safety
+supervisor), no obstacles, ground-truth or noisy person observations; and its metrics are
+those of :func:`companion.metrics.compute`. The results agree with the single-episode
+simulator to 1e-9 (``tests/sim/test_fast_batch.py``).
 
-How: episodes are lanes of :mod:`companion.control.lqr_lanes`, the same code the
-single-episode controller runs as a set of one lane, so each lane reproduces its single
-episode bit for bit. The Riccati equations of a block of 64 lanes are solved together (SIMD);
-the lanes are split between threads (one per CPU; the kernels release the GIL). Only running
-sums for the metrics are kept, so memory does not grow with the episode length, and episodes
-are processed in chunks of 2,048, so it does not grow with their number.
+How: episodes are lanes. LQR lanes run :mod:`companion.control.lqr_lanes` (the Riccati
+equations of 64 lanes solved together, SIMD); baseline lanes run
+:mod:`companion.control.baseline_lanes`. The lanes are split between threads (one per CPU;
+the kernels release the GIL). Only running sums for the metrics are kept, so memory does not
+grow with the episode length, and episodes are processed in chunks of 2,048, so it does not
+grow with their number.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from __future__ import annotations
 import math
 import os
 from concurrent.futures import ThreadPoolExecutor
+from functools import partial
 from typing import Sequence
 
 import numpy as np
@@ -27,15 +29,17 @@ from numba import njit
 from companion.control import CONTROLLERS
 from companion.control.lqr import LqrController
 from companion.errors import ConfigError
+from companion.control.baseline_lanes import KINDS, STATE_SIZE, BaselineLanes, baseline_config
 from companion.control.lqr_lanes import LaneSet, step_lanes
 from companion.fastlqr import lqr_step_config, relative_state_nb, slot_reference_nb
 from companion.metrics import Tolerance
-from companion.model import robot_pose_at
+from companion.model import robot_pose_at, slot_reference
 from companion.params import Params
 from companion.sim.episode import SensorNoise
 
 #: Controllers the compiled batch runs (bare, see the module docstring).
 LQR_FAMILY = ("lqr", "lqr-paper", "lqr-tuned")
+SUPPORTED = LQR_FAMILY + tuple(KINDS)
 #: Lanes per block: one block is one thread's unit of work.
 BLOCK = 64
 #: Episodes per chunk (bounds the memory of the per-step person noise).
@@ -99,20 +103,21 @@ def _observe(step, idx, person, pidx, noise, noisy, observed):
 
 
 @njit(**_NB)
-def _account(step, dt, idx, person, pidx, config, vw, pose, tol, acc):
-    """Per lane: the metrics' running sums against the true person, then the plant."""
+def _account(step, dt, idx, person, pidx, geo, vw, pose, tol, acc):
+    """Per lane: the metrics' running sums against the true person, then the plant.
+    ``geo`` rows: d, rho_d, alpha_d."""
     for lane in range(idx.size):
         g = idx[lane]
         if g < 0:
             continue
-        c = config[g]
+        d, rho_d, alpha_d = geo[g, 0], geo[g, 1], geo[g, 2]
         v, om = vw[lane, 0], vw[lane, 1]
         h = person[pidx[g], step]
         x, y, th = pose[lane, 0], pose[lane, 1], pose[lane, 2]
-        rho, alpha, beta = relative_state_nb(x, y, th, h[0], h[1], h[2], c[0])
-        beta_ref, _, _ = slot_reference_nb(h[3], h[4], c[4], c[5], c[0])
-        e_rho = rho - c[4]
-        e_alpha = _wrap_metric(alpha - c[5])
+        rho, alpha, beta = relative_state_nb(x, y, th, h[0], h[1], h[2], d)
+        beta_ref, _, _ = slot_reference_nb(h[3], h[4], rho_d, alpha_d, d)
+        e_rho = rho - rho_d
+        e_alpha = _wrap_metric(alpha - alpha_d)
         e_beta = _wrap_metric(beta)
         e_ref = _wrap_metric(beta - beta_ref)
         row = acc[g]
@@ -133,8 +138,8 @@ def _account(step, dt, idx, person, pidx, config, vw, pose, tol, acc):
 
 def unsupported(spec) -> str:
     """Why the compiled batch cannot run ``spec`` (empty string if it can)."""
-    if spec.controller not in LQR_FAMILY:
-        return f"controller {spec.controller!r} is not one of {', '.join(LQR_FAMILY)}"
+    if spec.controller not in SUPPORTED:
+        return f"controller {spec.controller!r} is not one of {', '.join(SUPPORTED)}"
     if spec.stack:
         return "the standard stack (avoidance layer and supervisor) is not compiled"
     if spec.obstacles:
@@ -171,10 +176,10 @@ def _metrics(row: np.ndarray, steps: int, dt: float) -> dict:
     }
 
 
-def run_lqr_batch(specs: Sequence, tol: Tolerance = Tolerance(), threads: int | None = None
+def run_fast_batch(specs: Sequence, tol: Tolerance = Tolerance(), threads: int | None = None
                   ) -> list[dict]:
     """Metrics of every episode in ``specs`` (:class:`companion.sim.batch.EpisodeSpec` with
-    ``stack=False``, an LQR-family controller and no obstacles), in order.
+    ``stack=False``, a controller of :data:`SUPPORTED` and no obstacles), in order.
 
     Parameters
     ----------
@@ -222,15 +227,20 @@ def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads:
     tables = []
     pidx = np.empty(n, np.int64)
     start = np.empty((n, 3))
-    config = np.empty((n, 13))
-    q_diag = np.empty((n, 5))
-    r_diag = np.empty((n, 2))
-    rest_gain = np.empty((n, 2, 5))
+    geo = np.empty((n, 3))
+    config = np.zeros((n, 13))
+    base_config = np.zeros((n, 17))
+    base_state = np.zeros((n, STATE_SIZE))
+    q_diag = np.ones((n, 5))
+    r_diag = np.ones((n, 2))
+    rest_gain = np.zeros((n, 2, 5))
     noisy = np.zeros(n, np.bool_)
     noise = np.zeros((n, steps if any(s.noise != SensorNoise() for s in specs) else 1, 5))
     rest_cache: dict[Params, np.ndarray] = {}
     for e, spec in enumerate(specs):
         params = CONTROLLERS[spec.controller].adjust(spec.params)
+        f, d = params.formation, params.robot.d
+        geo[e] = (d, f.distance, f.bearing)
         key = id(spec.person)
         if key not in persons:
             persons[key] = len(tables)
@@ -238,17 +248,23 @@ def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads:
         pidx[e] = persons[key]
         if spec.start is None:
             h0 = spec.person.state(0.0)
-            f = params.formation
-            start[e] = robot_pose_at(f.distance, f.bearing, 0.0, h0.x, h0.y, h0.theta,
-                                     params.robot.d)
+            start[e] = robot_pose_at(f.distance, f.bearing, 0.0, h0.x, h0.y, h0.theta, d)
+            # run_episode tells the controller the slot velocity before the first step
+            ref = slot_reference(h0.v, h0.omega, f.distance, f.bearing, d)
+            base_state[e, :3] = (ref.v, ref.omega, 1.0)
         else:
             start[e] = (spec.start.x, spec.start.y, spec.start.theta)
-        config[e] = lqr_step_config(params)
-        q_diag[e] = params.lqr.q
-        r_diag[e] = params.lqr.r
-        if params not in rest_cache:
-            rest_cache[params] = LqrController(params).rest_gain
-        rest_gain[e] = rest_cache[params]
+        if spec.controller in LQR_FAMILY:
+            config[e] = lqr_step_config(params)
+            q_diag[e] = params.lqr.q
+            r_diag[e] = params.lqr.r
+            if params not in rest_cache:
+                rest_cache[params] = LqrController(params).rest_gain
+            rest_gain[e] = rest_cache[params]
+        else:
+            base_config[e] = baseline_config(spec.controller, params)
+            if spec.controller == "pid":
+                base_state[e] = 0.0       # PidController ignores a command before its first step
         if spec.noise != SensorNoise():
             noisy[e] = True
             sn = spec.noise
@@ -259,17 +275,27 @@ def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads:
     acc[:, _MIN_DIST] = np.inf
     acc[:, _LAST_OUT] = -1.0
     acc[:, _FINITE] = 1.0
-    shared = (person, pidx, noise, noisy, config, q_diag, r_diag, rest_gain, tol, acc)
-    sets = []
-    for part in np.array_split(np.arange(n), min(threads, n)):
-        lanes = LaneSet(_padded(part), BLOCK, q_diag, r_diag)
-        lanes.pose[:part.size] = start[part]
-        sets.append(lanes)
-    if len(sets) == 1:
-        _drive(sets[0], steps, dt, shared)
+    shared = (person, pidx, noise, noisy, geo, tol, acc)
+    is_lqr = np.array([s.controller in LQR_FAMILY for s in specs])
+    tasks = []
+    for family in (np.flatnonzero(is_lqr), np.flatnonzero(~is_lqr)):
+        for part in np.array_split(family, min(threads, family.size)) if family.size else []:
+            idx = _padded(part)
+            if is_lqr[part[0]]:
+                lanes = LaneSet(idx, BLOCK, q_diag, r_diag)
+                control = partial(step_lanes, lanes, config, q_diag, r_diag, rest_gain)
+            else:
+                lanes = BaselineLanes(idx)
+                lanes.state[:part.size] = base_state[part]
+                control = partial(lanes.step, base_config)
+            lanes.pose[:part.size] = start[part]
+            tasks.append((lanes, control))
+    if len(tasks) == 1:
+        _drive(*tasks[0], steps, dt, shared)
     else:
-        with ThreadPoolExecutor(max_workers=len(sets)) as pool:
-            for future in [pool.submit(_drive, lanes, steps, dt, shared) for lanes in sets]:
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            for future in [pool.submit(_drive, lanes, control, steps, dt, shared)
+                           for lanes, control in tasks]:
                 future.result()
     return acc
 
@@ -282,10 +308,10 @@ def _padded(part: np.ndarray) -> np.ndarray:
     return out
 
 
-def _drive(lanes: LaneSet, steps: int, dt: float, shared: tuple) -> None:
-    """Run one thread's lanes through every period (the kernels release the GIL)."""
-    person, pidx, noise, noisy, config, q_diag, r_diag, rest_gain, tol, acc = shared
+def _drive(lanes, control, steps: int, dt: float, shared: tuple) -> None:
+    """Run one set of lanes through every period (the kernels release the GIL)."""
+    person, pidx, noise, noisy, geo, tol, acc = shared
     for step in range(steps):
         _observe(step, lanes.idx, person, pidx, noise, noisy, lanes.observed)
-        step_lanes(lanes, config, q_diag, r_diag, rest_gain)
-        _account(step, dt, lanes.idx, person, pidx, config, lanes.vw, lanes.pose, tol, acc)
+        control()
+        _account(step, dt, lanes.idx, person, pidx, geo, lanes.vw, lanes.pose, tol, acc)

@@ -15,7 +15,7 @@ from companion.obstacles import Circle
 from companion.params import LqrParams, Params
 from companion.sim.batch import EpisodeSpec, run_batch, run_one
 from companion.sim.episode import SensorNoise
-from companion.sim.lqr_batch import remainder_2pi_nb, run_lqr_batch, unicycle_step_nb
+from companion.sim.fast_batch import remainder_2pi_nb, run_fast_batch, unicycle_step_nb
 from companion.sim.person import Figure8, circle, line
 
 from test_batch import same  # tests/sim is on sys.path (pytest prepend mode)
@@ -54,7 +54,7 @@ def test_compiled_batch_equals_the_single_episode_simulator():
     amplifies such differences: there the single-episode simulator with scipy's solver
     disagrees with the compiled one just as much. Such episodes are rare and excluded."""
     specs = varied_specs()
-    got = run_lqr_batch(specs, threads=2)
+    got = run_fast_batch(specs, threads=2)
     sensitive = 0
     for spec, metrics in zip(specs, got):
         single = run_one(spec)
@@ -68,34 +68,45 @@ def test_compiled_batch_equals_the_single_episode_simulator():
     assert len({round(m["rmse_rho_m"], 9) for m in got}) == len(got)
 
 
+@pytest.mark.parametrize("name", ["pid", "vsm", "ic"])
+def test_compiled_baselines_equal_their_classes(name):
+    """Baseline lanes against PidController / VsmController / ImpedanceController in the
+    single-episode simulator, over the same varied episodes, mixed with LQR lanes."""
+    specs = [dataclasses.replace(s, controller=name) for s in varied_specs()]
+    mixed = specs + varied_specs()[:2]
+    got = run_fast_batch(mixed, threads=2)
+    for spec, metrics in zip(specs, got):
+        same(metrics, run_one(spec), tol=1e-9)
+
+
 def test_auto_backend_picks_the_compiled_batch_and_processes_run_the_rest():
     specs = [varied_specs()[i] for i in (0, 1, 3)]              # not the sensitive one
     compiled = run_batch(specs, workers=1)                      # all supported: compiled
     processes = run_batch(specs, workers=1, backend="processes")
     for a, b in zip(compiled, processes):
         same(a, b, tol=1e-9)
-    mixed = specs + [dataclasses.replace(specs[0], controller="pid")]
-    assert len(run_batch(mixed, workers=1)) == 4               # pid: processes
+    mixed = specs + [dataclasses.replace(specs[0], stack=True)]
+    assert len(run_batch(mixed, workers=1)) == 4               # a stack: processes
 
 
 def test_a_lane_does_not_depend_on_the_others():
     """Bit for bit: one thread or two, in a batch of twelve or alone."""
     specs = varied_specs()[:6]
-    alone = run_lqr_batch(specs[2:3], threads=1)[0]
-    same(run_lqr_batch(specs, threads=2)[2], alone, tol=0.0)
-    for a, b in zip(run_lqr_batch(specs, threads=1), run_lqr_batch(specs, threads=2)):
+    alone = run_fast_batch(specs[2:3], threads=1)[0]
+    same(run_fast_batch(specs, threads=2)[2], alone, tol=0.0)
+    for a, b in zip(run_fast_batch(specs, threads=1), run_fast_batch(specs, threads=2)):
         same(a, b, tol=0.0)
 
 
 @pytest.mark.parametrize("change, message", [
-    ({"controller": "pid"}, "episode 0: the compiled batch cannot run it: controller 'pid'"),
+    ({"controller": "mpc"}, "episode 0: the compiled batch cannot run it: controller 'mpc'"),
     ({"stack": True}, "standard stack"),
     ({"obstacles": (Circle(1.0, 1.0, 0.3),)}, "obstacles are not supported"),
 ])
 def test_unsupported_specs_are_named(change, message):
     spec = dataclasses.replace(varied_specs()[0], **change)
     with pytest.raises(ConfigError, match=message):
-        run_lqr_batch([spec])
+        run_fast_batch([spec])
     with pytest.raises(ConfigError, match=message):
         run_batch([spec], backend="compiled")
 
