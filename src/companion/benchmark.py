@@ -171,7 +171,8 @@ def run(episodes: int = 1000, duration: float = 60.0, workers: int | None = None
     result["speedup_vs_scipy"] = (result["scipy_step_us"]["median"]
                                   / result["step_us"]["lqr"]["median"])
     workers = workers or default_workers()
-    run_batch(batch_specs(sc, 2, 1.0, noisy=True), workers)          # load the kernels
+    run_batch(batch_specs(sc, 2, 1.0, noisy=True) + batch_specs(sc, 2, 1.0, controller="pid"),
+              workers)                                                # load the kernels
     result["batch_steps_per_s_by_controller"] = {}
     for name, noisy in (("lqr", False), ("lqr", True), ("pid", False), ("vsm", False),
                         ("ic", False)):
