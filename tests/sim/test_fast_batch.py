@@ -111,6 +111,14 @@ def test_unsupported_specs_are_named(change, message):
         run_batch([spec], backend="compiled")
 
 
+def test_too_short_episode_and_bad_thread_count():
+    spec = varied_specs()[0]
+    with pytest.raises(ConfigError, match="episode 0: duration: expected at least one sample"):
+        run_fast_batch([dataclasses.replace(spec, duration=0.01)])
+    with pytest.raises(ConfigError, match="threads: expected a positive integer"):
+        run_fast_batch([spec], threads=0)
+
+
 def test_unknown_backend():
     with pytest.raises(ConfigError, match="backend: expected one of auto, compiled, processes"):
         run_batch(varied_specs()[:1], backend="gpu")

@@ -168,7 +168,7 @@ def _metrics(row: np.ndarray, steps: int, dt: float) -> dict:
         "settling_time_s": settle,
         "final_abs_error": {"rho_m": float(row[_FIN_RHO]), "alpha_rad": float(row[_FIN_ALPHA]),
                             "beta_rad": float(row[_FIN_BETA])},
-        "duration_s": (steps - 1) * dt + (1 * dt - 0 * dt) if steps > 1 else 0.0,
+        "duration_s": (steps - 1) * dt + dt if steps > 1 else 0.0,   # as metrics._duration
         "steps": steps,
         "min_obstacle_clearance_m": None, "obstacle_collisions": 0,
         "share_ok": 1.0, "share_degraded": 0.0, "share_stopped": 0.0,
@@ -192,18 +192,25 @@ def run_fast_batch(specs: Sequence, tol: Tolerance = Tolerance(), threads: int |
     Raises
     ------
     ConfigError
-        If a spec is not supported (see :func:`unsupported`), naming its index.
+        If a spec is not supported (see :func:`unsupported`) or shorter than one period,
+        naming its index, or ``threads`` is not a positive integer.
     """
     for i, spec in enumerate(specs):
         reason = unsupported(spec)
         if reason:
             raise ConfigError(f"episode {i}: the compiled batch cannot run it: {reason}")
-    threads = threads or default_threads()
+    threads = default_threads() if threads is None else threads
+    if not isinstance(threads, int) or threads < 1:
+        raise ConfigError(f"threads: expected a positive integer, got {threads!r}")
     out: list[dict | None] = [None] * len(specs)
     groups: dict[tuple[int, float], list[int]] = {}
     for i, spec in enumerate(specs):
         dt = spec.params.dt
-        groups.setdefault((int(round(spec.duration / dt)), dt), []).append(i)
+        steps = int(round(spec.duration / dt))
+        if steps < 1:
+            raise ConfigError(f"episode {i}: duration: expected at least one sample period "
+                              f"({dt:g} s), got {spec.duration:g} s")
+        groups.setdefault((steps, dt), []).append(i)
     tolerance = np.array([tol.rho, tol.alpha, tol.beta])
     for (steps, dt), members in groups.items():
         for c0 in range(0, len(members), CHUNK):
