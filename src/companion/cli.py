@@ -419,7 +419,8 @@ def parser() -> argparse.ArgumentParser:
                     help="figure-8 episodes in the batch measurement (default 1000)")
     bn.add_argument("--duration", default="60", metavar="S",
                     help="simulated time per episode in s (default 60)")
-    bn.add_argument("--workers", type=int, help="batch worker processes (default: one per CPU)")
+    bn.add_argument("--workers", type=int, help="threads of the compiled batch and worker "
+                    "processes of the stack batch (default: one per CPU)")
     bn.add_argument("--no-compile-time", action="store_true",
                     help="skip the fresh-process compile and warm-up measurement")
     bn.add_argument("--out", metavar="FILE", help="also write the JSON figures to FILE")
