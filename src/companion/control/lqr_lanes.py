@@ -232,11 +232,6 @@ class LaneSet:
         self.observed = np.zeros((n, 5))       # person x, y, theta, v, omega (input)
         self.pose = np.zeros((n, 3))           # robot x, y, theta (input)
 
-    def reset(self) -> None:
-        """Forget every lane's history (a new episode)."""
-        for name in ("history", "warm", "has_gain", "mem", "p", "p_prev"):
-            getattr(self, name)[...] = 0
-
 
 def _cold(lanes: LaneSet, config: np.ndarray, q_diag: np.ndarray, r_diag: np.ndarray,
           rest_gain: np.ndarray) -> None:
