@@ -32,6 +32,7 @@ from companion.errors import ConfigError
 from companion.control.baseline_lanes import KINDS, STATE_SIZE, BaselineLanes, baseline_config
 from companion.control.lqr_lanes import LaneSet, step_lanes
 from companion.fastlqr import lqr_step_config, relative_state_nb, slot_reference_nb
+from companion.kinematics import unicycle_step
 from companion.metrics import Tolerance
 from companion.model import robot_pose_at, slot_reference
 from companion.params import Params
@@ -53,17 +54,8 @@ _SQ_RHO, _SQ_ALPHA, _SQ_BETA, _SQ_V, _SQ_W, _MIN_DIST, _LAST_OUT, _FIN_RHO, _FIN
 _N_ACC = 11
 
 
-@njit(cache=True, error_model="numpy")
-def unicycle_step_nb(x, y, theta, v, omega, dt):
-    """:func:`companion.kinematics.unicycle_step`, compiled."""
-    half = 0.5 * omega * dt
-    if abs(half) < 1e-6:
-        sinc = 1.0 - half * half / 6.0
-    else:
-        sinc = math.sin(half) / half
-    dist = v * dt * sinc
-    mid = theta + half
-    return x + dist * math.cos(mid), y + dist * math.sin(mid), theta + omega * dt
+#: :func:`companion.kinematics.unicycle_step`, compiled from the same source.
+unicycle_step_nb = njit(cache=True, error_model="numpy")(unicycle_step)
 
 
 @njit(cache=True, error_model="numpy")
