@@ -8,6 +8,10 @@ directory named after a hash of every source file of the package: any change sta
 cache. The base directory is ``NUMBA_CACHE_DIR`` if set, else the user's cache directory
 (``$XDG_CACHE_HOME`` or ``~/.cache``) under ``companion/numba``. If it cannot be created,
 numba's default (``__pycache__`` beside the sources) is left in place.
+
+numba has one cache setting per process: importing companion sets ``NUMBA_CACHE_DIR`` (and
+numba's config) for the whole process and its children, so other numba code in the same
+process caches there too.
 """
 
 from __future__ import annotations

@@ -18,7 +18,8 @@ Everything is measured in one run on the figure-8 scenario (Table 2, 60 s, 1,200
 * ``compile_s`` / ``warmup_s``: first LQR step in a fresh process with an empty numba cache
   (compilation) and with the cache filled (loading); ``batch_compile_s`` /
   ``batch_warmup_s``: the same for a first small batch;
-* ``peak_rss_mb``: peak resident memory of this process and of its worker processes.
+* ``peak_rss_mb``: the larger of this process's peak resident memory and that of its
+  largest child process (stack workers, compile-time processes).
 """
 
 from __future__ import annotations

@@ -1024,7 +1024,7 @@ def newton_lanes(a, b, q_diag, r_diag, p, active, lanes, corr):
     m_pow = ac
     m_sq = np.empty((n, n, lanes))
     t = np.empty((n, n, lanes))
-    done = np.zeros(lanes, np.bool_)
+    done = ~active[:lanes]   # inactive lanes take no part (a stale P must not stall the block)
     step = np.empty(lanes)
     size = np.empty(lanes)
     for _ in range(DARE_MAX_ITER):

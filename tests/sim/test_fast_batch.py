@@ -102,6 +102,7 @@ def test_a_lane_does_not_depend_on_the_others():
     ({"controller": "mpc"}, "episode 0: the compiled batch cannot run it: controller 'mpc'"),
     ({"stack": True}, "standard stack"),
     ({"obstacles": (Circle(1.0, 1.0, 0.3),)}, "obstacles are not supported"),
+    ({"params": Params().replace(lqr=LqrParams(solver="scipy"))}, "lqr.solver 'scipy'"),
 ])
 def test_unsupported_specs_are_named(change, message):
     spec = dataclasses.replace(varied_specs()[0], **change)

@@ -5,8 +5,9 @@ standard stack wraps it, person, parameters, start, seed, sensor noise, obstacle
 :func:`run_batch` returns one metrics dict (:func:`companion.metrics.compute`) per episode, in
 the order of the specs, from one of two back ends:
 
-* compiled (:mod:`companion.sim.fast_batch`): the bare LQR-family controllers without
-  obstacles, all episodes as lanes of one vectorised simulation;
+* compiled (:mod:`companion.sim.fast_batch`): every registered controller, bare (without the
+  avoidance layer and the supervisor), without obstacles, all episodes as lanes of one
+  vectorised simulation;
 * processes: anything, with the single-episode simulator
   (:func:`companion.sim.episode.run_episode`) in worker processes.
 
@@ -93,8 +94,9 @@ def run_batch(specs: Sequence[EpisodeSpec], workers: int | None = None,
     progress : callable, optional
         Called with the number of episodes finished so far.
     backend : {"auto", "compiled", "processes"}
-        "compiled": :func:`companion.sim.fast_batch.run_fast_batch` (bare LQR-family
-        controllers without obstacles; about 30x faster); "processes": the single-episode
+        "compiled": :func:`companion.sim.fast_batch.run_fast_batch` (bare controllers
+        without obstacles; for the LQR about 30x the processes back end's throughput,
+        docs/performance.md); "processes": the single-episode
         simulator in worker processes (anything); "auto": compiled when every spec allows it.
 
     Raises

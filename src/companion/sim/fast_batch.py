@@ -11,8 +11,8 @@ How: episodes are lanes. LQR lanes run :mod:`companion.control.lqr_lanes` (the R
 equations of 64 lanes solved together, SIMD); baseline lanes run
 :mod:`companion.control.baseline_lanes`. The lanes are split between threads (one per CPU;
 the kernels release the GIL). Only running sums for the metrics are kept, so memory does not
-grow with the episode length, and episodes are processed in chunks of 2,048, so it does not
-grow with their number.
+grow with the episode length beyond the person's path and sensor noise (5 numbers per step),
+and episodes are processed in chunks of 2,048, so it does not grow with their number.
 """
 
 from __future__ import annotations
@@ -136,7 +136,19 @@ def unsupported(spec) -> str:
         return "the standard stack (avoidance layer and supervisor) is not compiled"
     if spec.obstacles:
         return "obstacles are not supported"
+    if spec.controller in LQR_FAMILY and spec.params.lqr.solver != "compiled":
+        return "lqr.solver 'scipy' is the single-episode reference; the batch is compiled"
     return ""
+
+
+def _person_key(person) -> object:
+    """Equal persons share one table of their path: the person itself where it is hashable
+    (frozen dataclasses such as Figure8), else its identity."""
+    try:
+        hash(person)
+    except TypeError:
+        return ("id", id(person))
+    return person
 
 
 def _person_states(person, steps: int, dt: float) -> np.ndarray:
@@ -222,7 +234,7 @@ def default_threads() -> int:
 def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads: int
                ) -> np.ndarray:
     n = len(specs)
-    persons: dict[int, int] = {}
+    persons: dict[object, int] = {}
     tables = []
     pidx = np.empty(n, np.int64)
     start = np.empty((n, 3))
@@ -240,7 +252,7 @@ def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads:
         params = CONTROLLERS[spec.controller].adjust(spec.params)
         f, d = params.formation, params.robot.d
         geo[e] = (d, f.distance, f.bearing)
-        key = id(spec.person)
+        key = _person_key(spec.person)
         if key not in persons:
             persons[key] = len(tables)
             tables.append(_person_states(spec.person, steps, dt))
