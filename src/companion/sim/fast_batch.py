@@ -18,7 +18,6 @@ and episodes are processed in chunks of 2,048, so it does not grow with their nu
 from __future__ import annotations
 
 import math
-import os
 from concurrent.futures import ThreadPoolExecutor
 from functools import partial
 from typing import Sequence
@@ -36,6 +35,7 @@ from companion.kinematics import unicycle_step
 from companion.metrics import Tolerance
 from companion.model import robot_pose_at, slot_reference
 from companion.params import Params
+from companion.sim.batch import default_workers
 from companion.sim.episode import SensorNoise
 
 #: Controllers the compiled batch runs (bare, see the module docstring).
@@ -203,7 +203,7 @@ def run_fast_batch(specs: Sequence, tol: Tolerance = Tolerance(), threads: int |
         reason = unsupported(spec)
         if reason:
             raise ConfigError(f"episode {i}: the compiled batch cannot run it: {reason}")
-    threads = default_threads() if threads is None else threads
+    threads = default_workers() if threads is None else threads
     if not isinstance(threads, int) or threads < 1:
         raise ConfigError(f"threads: expected a positive integer, got {threads!r}")
     out: list[dict | None] = [None] * len(specs)
@@ -223,12 +223,6 @@ def run_fast_batch(specs: Sequence, tol: Tolerance = Tolerance(), threads: int |
             for i, row in zip(chunk, rows):
                 out[i] = _metrics(row, steps, dt)
     return out  # type: ignore[return-value]
-
-
-def default_threads() -> int:
-    """One thread per CPU this process may use."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else \
-        (os.cpu_count() or 1)
 
 
 def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads: int
