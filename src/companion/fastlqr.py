@@ -58,6 +58,11 @@ _JIT = {"cache": True, "error_model": "numpy"}
 # sizes (the 5x5 / 5x2 LQR problem in lqr_gain_nb), numba compiles a specialisation for those
 # literal values, LLVM sees constant trip counts and unrolls the loops: ~3x faster than the
 # runtime-sized version, which generic callers (solve_dare_nb, expm_nb) use.
+#
+# Compile time: whole-array assignments (``x[:, :] = y``, ``x[:] = 0.0``), ``np.full`` and
+# array operators pull in numba's generic broadcasting code, several seconds of compilation
+# each on the project's machine (``gain[:, :] = k`` alone cost ~4 s). The kernels here and in
+# the lane modules therefore copy and fill with explicit loops.
 
 
 # ---------------------------------------------------------------------------------------------
@@ -142,6 +147,16 @@ def _copy(src, dst, n, m):
     for i in range(n):
         for j in range(m):
             dst[i, j] = src[i, j]
+
+
+@njit(**_JIT)
+def _nan_matrix(n):
+    """An (n, n) matrix of nan."""
+    out = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = np.nan
+    return out
 
 
 @njit(**_JIT)
@@ -242,7 +257,7 @@ def _expm(x, n):
     """Body of :func:`expm_nb` for an (n, n) ``x``."""
     nrm = _norm_inf(x.T, n, n)  # 1-norm of x
     if not nrm < np.inf:
-        return np.full((n, n), np.nan)
+        return _nan_matrix(n)
     s = 0
     if nrm > _THETA13:
         s = math.ceil(math.log2(nrm / _THETA13))
@@ -287,7 +302,7 @@ def _expm(x, n):
             r[i, j] = v[i, j] + u[i, j]
     piv = np.empty(n, np.int64)
     if not _lu_factor(lu, piv, n):
-        return np.full((n, n), np.nan)
+        return _nan_matrix(n)
     _lu_solve(lu, piv, r, n, n)
     tmp = a2
     for _ in range(s):
@@ -896,10 +911,10 @@ def lqr_step_nb(rx, ry, rth, hx, hy, hth, hv, hw, config, q_diag, r_diag, memory
     k = np.empty((2, 5))
     if lqr_gain_nb(lin[0], lin[1], lin[2], lin[3], lin[4], hv, hw, d, dt, zoh, rho_min,
                    q_diag, r_diag, k):
-        gain[:, :] = k
+        _copy(k, gain, 2, 5)
         memory[2] = 1.0
     elif memory[2] == 0.0:
-        gain[:, :] = rest_gain
+        _copy(rest_gain, gain, 2, 5)
         memory[2] = 1.0
     xi[0] = min(max(rho - rho_d, -config[8]), config[8])
     xi[1] = min(max(wrap_pi_nb(alpha - alpha_d), -config[9]), config[9])
@@ -1024,14 +1039,17 @@ def newton_lanes(a, b, q_diag, r_diag, p, active, lanes, corr):
     m_pow = ac
     m_sq = np.empty((n, n, lanes))
     t = np.empty((n, n, lanes))
-    done = ~active[:lanes]   # inactive lanes take no part (a stale P must not stall the block)
+    done = np.empty(lanes, np.bool_)
+    for e in range(lanes):
+        done[e] = not active[e]   # inactive lanes take no part (a stale P must not stall the block)
     step = np.empty(lanes)
     size = np.empty(lanes)
     for _ in range(DARE_MAX_ITER):
         _mm_lanes(d, m_pow, tmp, n, n, lanes)
         _mm_tn_lanes(m_pow, tmp, t, n, n, lanes)
-        step[:] = 0.0
-        size[:] = 0.0
+        for e in range(lanes):
+            step[e] = 0.0
+            size[e] = 0.0
         for i in range(n):
             for j in range(n):
                 for e in range(lanes):
@@ -1099,9 +1117,11 @@ def stable_lanes(a, b, k, lanes, ok):
     if 1.0 - RADIUS_MARGIN > _SHORTCUT_RADIUS:
         for _ in range(12):
             _mm_lanes(x, x, y, n, n, lanes)
-            nrm[:] = 0.0
+            for e in range(lanes):
+                nrm[e] = 0.0
             for i in range(n):
-                row[:] = 0.0
+                for e in range(lanes):
+                    row[e] = 0.0
                 for j in range(n):
                     for e in range(lanes):
                         row[e] += abs(y[i, j, e])

@@ -105,7 +105,8 @@ def _solve(a, b, qd, rd, p, p_prev, history, k, active, corr):
     step_corr = np.empty(block)
     for blk in range(blocks):
         act = active[blk * block:(blk + 1) * block]
-        converged[:] = False
+        for j in range(block):
+            converged[j] = False
         for j in range(block):
             if not act[j]:
                 continue
