@@ -107,7 +107,6 @@ def _solve(a, b, qd, rd, p, p_prev, history, k, active, corr):
         act = active[blk * block:(blk + 1) * block]
         for j in range(block):
             converged[j] = False
-        for j in range(block):
             if not act[j]:
                 continue
             extrapolate = history[blk * block + j] >= 2
