@@ -5,10 +5,11 @@
 For each discretisation ('euler', the default, and 'zoh') and the same random operating points
 (default Params otherwise), prints the median and 99th percentile time per gain of:
 
-* ``lqr_gain_nb`` called from a compiled loop (no Python in between): per operating point, the
-  mean over REPEAT calls, then median / p99 over the points;
-* ``lqr_gain_nb`` called from Python, one timed call at a time (numba dispatch included);
-* the Python wrapper ``lqr_gain(chi, u, w, params)`` (argument unpacking, arrays, dispatch);
+* ``dare_gain_nb`` (Riccati equation, gain, stability test) on a prebuilt model, called from a
+  compiled loop (no Python in between): per operating point, the mean over REPEAT calls, then
+  median / p99 over the points;
+* ``dare_gain_nb`` called from Python, one timed call at a time (numba dispatch included);
+* the Python function ``lqr_gain(chi, u, w, params)`` (model, gain, arrays, dispatch);
 * the scipy path ``LqrController(params).gain(chi, u, w)`` with ``lqr.solver = "scipy"``;
 
 and the speed-up of each over scipy (ratio of medians), plus the SDA iteration counts and the
@@ -29,8 +30,6 @@ from threadpoolctl import threadpool_limits
 
 from companion import fastlqr
 from companion.control.lqr import LqrController
-from companion.lqr import augment
-from companion.model import discretize, jacobians
 from companion.params import LqrParams, Params
 
 REPEAT = 200  # calls per operating point in the compiled loop
@@ -49,12 +48,11 @@ def operating_points(n: int, seed: int) -> list[tuple[np.ndarray, np.ndarray, np
     return out
 
 
-def gain_args(chi, u, w, params: Params, k: np.ndarray) -> tuple:
-    """Arguments of ``lqr_gain_nb`` for an operating point (floats and float64 arrays)."""
+def model(chi, u, w, params: Params) -> tuple[np.ndarray, np.ndarray]:
+    """The augmented model of an operating point, as the controller builds it."""
     lqr = params.lqr
-    return (float(chi[0]), float(chi[1]), float(chi[2]), float(u[0]), float(u[1]),
-            float(w[0]), float(w[1]), params.robot.d, params.dt, lqr.discretization == "zoh",
-            lqr.rho_min, np.array(lqr.q), np.array(lqr.r), k)
+    return fastlqr.augmented_model(chi, u, w, params.robot.d, params.dt,
+                                   lqr.discretization == "zoh", lqr.rho_min)
 
 
 def stats(seconds: list[float] | np.ndarray) -> tuple[float, float]:
@@ -70,21 +68,20 @@ def main() -> None:
     args = parser.parse_args()
 
     @njit
-    def repeat(n, rho, alpha, beta, v, omega, v_h, omega_h, d, dt, zoh, rho_min, q, r, k):
-        ok = True
+    def repeat(n, a, b, q, r, p, k):
+        status = 0
         for _ in range(n):
-            ok = fastlqr.lqr_gain_nb(rho, alpha, beta, v, omega, v_h, omega_h, d, dt, zoh,
-                                     rho_min, q, r, k)
-        return ok
+            status, _ = fastlqr.dare_gain_nb(a, b, q, r, p, k)
+        return status
 
     points = operating_points(args.points, args.seed)
     print(f"{len(points)} operating points, seed {args.seed}")
     for method in ("euler", "zoh"):
         params = Params().replace(lqr=LqrParams(discretization=method))
-        lqr = params.lqr
-        k = np.empty((2, 5))
+        q, r = np.array(params.lqr.q), np.array(params.lqr.r)
+        k, p = np.empty((2, 5)), np.empty((5, 5))
         t = time.perf_counter()
-        fastlqr.lqr_gain_nb(*gain_args(*points[0], params, k))
+        fastlqr.lqr_gain(*points[0], params)
         first = time.perf_counter() - t
         controller = LqrController(params.replace(lqr=LqrParams(discretization=method, solver="scipy")))
 
@@ -96,29 +93,27 @@ def main() -> None:
                 k_ref = controller.gain(chi, u, w)
             except np.linalg.LinAlgError:
                 continue
-            if not fastlqr.lqr_gain_nb(*gain_args(chi, u, w, params, k)):
-                print(f"  compiled gain failed where scipy succeeded: {chi} {u} {w}")
+            a, b = model(chi, u, w, params)
+            status, it = fastlqr.dare_gain_nb(a, b, q, r, p, k)
+            if status != fastlqr.GAIN_STABLE:
+                print(f"  compiled gain not proved stabilising where scipy succeeded: "
+                      f"{chi} {u} {w} (status {status})")
                 continue
             worst = max(worst, float(np.max(np.abs(k - k_ref)) / np.max(np.abs(k_ref))))
-            lin = np.array([max(chi[0], lqr.rho_min), chi[1], chi[2]])
-            a_bar, b_bar = augment(*discretize(*jacobians(lin, u, w, params.robot.d),
-                                               params.dt, method))
-            _, it = fastlqr.solve_dare_nb(a_bar, b_bar, np.diag(lqr.q), np.diag(lqr.r),
-                                          np.empty((5, 5)))
             iterations.append(it)
             kept.append((chi, u, w))
 
-        repeat(1, *gain_args(*kept[0], params, k))  # compile the loop
+        models = [model(*point, params) for point in kept]
+        repeat(1, *models[0], q, r, p, k)  # compile the loop
         loop = []
-        for p in kept:
+        for a, b in models:
             t = time.perf_counter()
-            repeat(REPEAT, *gain_args(*p, params, k))
+            repeat(REPEAT, a, b, q, r, p, k)
             loop.append((time.perf_counter() - t) / REPEAT)
         from_python = []
-        for p in kept:
-            a = gain_args(*p, params, k)
+        for a, b in models:
             t = time.perf_counter()
-            fastlqr.lqr_gain_nb(*a)
+            fastlqr.dare_gain_nb(a, b, q, r, p, k)
             from_python.append(time.perf_counter() - t)
         wrapper = []
         for chi, u, w in kept:
@@ -138,9 +133,9 @@ def main() -> None:
               f"p99 {np.percentile(its, 99):.0f}, max {its.max()}; "
               f"max |K - K_scipy| / max|K_scipy| = {worst:.1e}")
         print(f"  {'path':34s} {'median':>10s} {'p99':>10s} {'speed-up':>9s}")
-        for name, times in (("lqr_gain_nb, compiled loop", loop),
-                            ("lqr_gain_nb, from Python", from_python),
-                            ("lqr_gain (Python wrapper)", wrapper),
+        for name, times in (("dare_gain_nb, compiled loop", loop),
+                            ("dare_gain_nb, from Python", from_python),
+                            ("lqr_gain (model + gain)", wrapper),
                             ("LqrController.gain (scipy)", scipy_path)):
             median, p99 = stats(times)
             print(f"  {name:34s} {median:8.2f}us {p99:8.2f}us {ref_median / median:8.0f}x")

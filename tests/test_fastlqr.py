@@ -128,11 +128,11 @@ def radius(a_bar, b_bar, k):
 
 
 def ours(op):
-    """``(ok, K)`` from the compiled gain."""
-    k = np.empty((2, 5))
-    ok = fastlqr.lqr_gain_nb(*op["chi"], *op["u"], *op["w"], op["d"], op["dt"],
-                             op["method"] == "zoh", RHO_MIN, op["q"], op["r"], k)
-    return ok, k
+    """``(ok, K)`` from the compiled model and gain."""
+    a, b = fastlqr.augmented_model(op["chi"], op["u"], op["w"], op["d"], op["dt"],
+                                   op["method"] == "zoh", RHO_MIN)
+    k, p = np.empty((2, 5)), np.empty((5, 5))
+    return fastlqr.stabilising_gain(a, b, op["q"], op["r"], p, k), k
 
 
 # ---------------------------------------------------------------------------------------------
@@ -166,8 +166,9 @@ def test_gain_matches_scipy(op):
     # Our P (same A_bar, B_bar as scipy's) solves the DARE: symmetric, positive semi-definite,
     # with a Riccati residual at most 1e-8 relative, or 10x scipy's where that is larger
     # (ill-conditioned cases, where even the exact P rounded to doubles leaves ~1e-10).
-    p = np.empty((5, 5))
-    converged, iterations = fastlqr.solve_dare_nb(a_bar, b_bar, q, r, p)
+    p, k_same = np.empty((5, 5)), np.empty((2, 5))
+    status, iterations = fastlqr.dare_gain_nb(a_bar, b_bar, op["q"], op["r"], p, k_same)
+    converged = status != fastlqr.GAIN_FAILED
     scale = max(1.0, float(np.max(np.abs(p))))
     eta = riccati_residual(a_bar, b_bar, q, r, p_ref) / max(1.0, float(np.max(np.abs(p_ref))))
     if converged:
@@ -294,14 +295,15 @@ def test_jacobians_match_model(rho, alpha, beta, v, omega, v_h, omega_h, d):
 
 
 @SETTINGS
-@given(rhos, angles, angles, vs, omegas, person_vs, person_omegas, offsets, periods, methods)
-def test_discretize_matches_model(rho, alpha, beta, v, omega, v_h, omega_h, d, dt, method):
-    jx, ju = jacobians(np.array([max(rho, RHO_MIN), alpha, beta]), np.array([v, omega]),
-                       np.array([v_h, omega_h]), d)
-    a, b = fastlqr.discretize_nb(jx, ju, dt, method == "zoh")
-    a_ref, b_ref = discretize(jx, ju, dt, method)
-    np.testing.assert_allclose(a, a_ref, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(b, b_ref, rtol=0, atol=1e-12)
+@given(operating_points())
+def test_augmented_model_matches_model(op):
+    """model_euler_nb / model_zoh_nb against jacobians, discretize and augment."""
+    a, b = fastlqr.augmented_model(op["chi"], op["u"], op["w"], op["d"], op["dt"],
+                                   op["method"] == "zoh", RHO_MIN)
+    a_ref, b_ref = reference_model(op)
+    scale = max(1.0, float(np.max(np.abs(a_ref))))
+    np.testing.assert_allclose(a, a_ref, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(b, b_ref, rtol=0, atol=1e-12 * scale)
 
 
 @settings(max_examples=200, deadline=None)
@@ -318,7 +320,8 @@ def test_expm_matches_scipy(n, log_scale, seed):
 @settings(max_examples=200, deadline=None)
 @given(st.integers(1, 6), st.floats(0.2, 1.5), st.floats(0.0, 3.0), st.integers(0, 2**32 - 1))
 def test_spectral_radius_below(n, target, skew, seed):
-    """Both the squaring shortcut and the eigenvalue fallback, on non-normal matrices."""
+    """Both the squaring shortcut and the eigenvalue fallback, on non-normal matrices.
+    (Every size: the squaring test is sized at run time, the LQR uses it for 5x5.)"""
     rng = np.random.default_rng(seed)
     m = rng.standard_normal((n, n))
     m = m + 10.0 ** skew * np.triu(rng.standard_normal((n, n)), 1)  # large transients

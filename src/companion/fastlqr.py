@@ -52,7 +52,16 @@ _THETA13 = 5.371920351148152
 # spectral_radius_below only proves bounds above this.
 _SHORTCUT_RADIUS = 0.5 ** (1.0 / 4096.0)
 
-_JIT = {"cache": True, "error_model": "numpy"}
+_JIT = {"cache": True, "error_model": "numpy", "no_cfunc_wrapper": True}
+#: Functions only called from compiled code: no Python wrapper to compile.
+_INNER = {**_JIT, "no_cpython_wrapper": True}
+
+#: Sizes of the augmented companion model: 5 states, 2 inputs.
+NX, NU = 5, 2
+#: Status of :func:`dare_gain_nb` (and of the stability tests).
+GAIN_FAILED, GAIN_STABLE, GAIN_UNDECIDED = 0, 1, 2
+#: 5x5 scratch matrices of dare_gain_nb (_sda uses 0-7, the saved SDA solution is 8).
+_WORKSPACE = 9
 
 # The kernels below take their dimensions as arguments. Called from compiled code with literal
 # sizes (the 5x5 / 5x2 LQR problem in lqr_gain_nb), numba compiles a specialisation for those
@@ -69,7 +78,7 @@ _JIT = {"cache": True, "error_model": "numpy"}
 # Small dense linear algebra kernels (explicit loops: for 5x5 matrices they beat BLAS/LAPACK).
 # ---------------------------------------------------------------------------------------------
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _matmul(a, b, out, n, k, m):
     """``out = a @ b`` for ``a`` (n, k), ``b`` (k, m); ``out`` must not alias ``a`` or ``b``."""
     for i in range(n):
@@ -80,18 +89,7 @@ def _matmul(a, b, out, n, k, m):
             out[i, j] = s
 
 
-@njit(**_JIT)
-def _matmul_tn(a, b, out, n, k, m):
-    """``out = a.T @ b`` for ``a`` (k, n), ``b`` (k, m); ``out`` must not alias them."""
-    for i in range(n):
-        for j in range(m):
-            s = 0.0
-            for l in range(k):
-                s += a[l, i] * b[l, j]
-            out[i, j] = s
-
-
-@njit(**_JIT)
+@njit(**_INNER)
 def _lu_factor(a, piv, n):
     """LU factorisation with partial pivoting of the (n, n) ``a``, in place.
 
@@ -118,7 +116,7 @@ def _lu_factor(a, piv, n):
     return True
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _lu_solve(lu, piv, b, n, m):
     """Solve ``A X = b`` in place for the (n, m) ``b``, given ``_lu_factor`` of A."""
     for k in range(n):
@@ -141,15 +139,7 @@ def _lu_solve(lu, piv, b, n, m):
             b[i, j] /= d
 
 
-@njit(**_JIT)
-def _copy(src, dst, n, m):
-    """``dst[:n, :m] = src[:n, :m]``."""
-    for i in range(n):
-        for j in range(m):
-            dst[i, j] = src[i, j]
-
-
-@njit(**_JIT)
+@njit(**_INNER)
 def _nan_matrix(n):
     """An (n, n) matrix of nan."""
     out = np.empty((n, n))
@@ -159,19 +149,7 @@ def _nan_matrix(n):
     return out
 
 
-@njit(**_JIT)
-def _max_abs(a, n, m):
-    """Largest absolute entry of the (n, m) ``a``; nan if an entry is nan."""
-    out = 0.0
-    for i in range(n):
-        for j in range(m):
-            x = abs(a[i, j])
-            if not x <= out:  # also catches nan
-                out = x
-    return out
-
-
-@njit(**_JIT)
+@njit(**_INNER)
 def _norm_inf(a, n, m):
     """Infinity-norm (largest absolute row sum) of the (n, m) ``a``; nan if an entry is nan."""
     out = 0.0
@@ -182,6 +160,7 @@ def _norm_inf(a, n, m):
         if not s <= out:
             out = s
     return out
+
 
 
 # ---------------------------------------------------------------------------------------------
@@ -252,7 +231,7 @@ def expm_nb(x):
     return _expm(x, x.shape[0])
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _expm(x, n):
     """Body of :func:`expm_nb` for an (n, n) ``x``."""
     nrm = _norm_inf(x.T, n, n)  # 1-norm of x
@@ -311,208 +290,190 @@ def _expm(x, n):
     return r
 
 
+@njit(**_INNER)
+def _augment(phi, gamma, a, b):
+    """Write the augmented model ``A_bar = [[phi, gamma], [0, I]]``, ``B_bar = [[gamma], [I]]``
+    (:func:`companion.lqr.augment`) into ``a`` (5, 5) and ``b`` (5, 2); ``phi`` is (3, 3) and
+    ``gamma`` (3, 2)."""
+    for i in range(NX):
+        for j in range(NX):
+            a[i, j] = 0.0
+        for j in range(NU):
+            b[i, j] = 0.0
+    for i in range(3):
+        for j in range(3):
+            a[i, j] = phi[i, j]
+        for j in range(NU):
+            a[i, 3 + j] = gamma[i, j]
+            b[i, j] = gamma[i, j]
+    for i in range(NU):
+        a[3 + i, 3 + i] = 1.0
+        b[3 + i, i] = 1.0
+
+
 @njit(**_JIT)
-def discretize_nb(jx, ju, dt, zoh):
-    """Discretise ``dx/dt = jx x + ju u`` with sample period ``dt``, as ``model.discretize``.
+def model_euler_nb(rho, alpha, beta, v, omega, v_h, omega_h, d, dt, a, b):
+    """Augmented companion model linearised at ``(chi, u, w)`` and discretised by forward
+    Euler, ``(I + dt Jx, dt Ju)`` (the paper), written into ``a`` (5, 5) and ``b`` (5, 2).
 
-    Parameters
-    ----------
-    jx : ndarray, shape (n, n)
-    ju : ndarray, shape (n, m)
-    dt : float
-    zoh : bool
-        False: forward Euler ``(I + dt jx, dt ju)`` (the paper); True: exact zero-order hold,
-        read off ``expm(dt [[jx, ju], [0, 0]])``.
-
-    Returns
-    -------
-    a : ndarray, shape (n, n)
-    b : ndarray, shape (n, m)
+    The same as ``augment(*discretize(*jacobians(chi, u, w, d), dt, "euler"))`` of
+    :mod:`companion.model` and :mod:`companion.lqr`. ``rho`` must be non-zero (the callers
+    floor it at ``lqr.rho_min``).
     """
-    n, m = ju.shape
-    return _discretize(jx, ju, dt, zoh, n, m, n + m)
+    jx, ju = jacobians_nb(rho, alpha, beta, v, omega, v_h, omega_h, d)
+    phi = np.empty((3, 3))
+    gamma = np.empty((3, NU))
+    for i in range(3):
+        for j in range(3):
+            phi[i, j] = dt * jx[i, j]
+        phi[i, i] += 1.0
+        for j in range(NU):
+            gamma[i, j] = dt * ju[i, j]
+    _augment(phi, gamma, a, b)
 
 
 @njit(**_JIT)
-def _discretize(jx, ju, dt, zoh, n, m, nm):
-    """Body of :func:`discretize_nb` for (n, n) ``jx`` and (n, m) ``ju``; ``nm = n + m``."""
-    a = np.empty((n, n))
-    b = np.empty((n, m))
-    if zoh:
-        block = np.zeros((nm, nm))
-        for i in range(n):
-            for j in range(n):
-                block[i, j] = dt * jx[i, j]
-            for j in range(m):
-                block[i, n + j] = dt * ju[i, j]
-        e = _expm(block, nm)
-        for i in range(n):
-            for j in range(n):
-                a[i, j] = e[i, j]
-            for j in range(m):
-                b[i, j] = e[i, n + j]
-    else:
-        for i in range(n):
-            for j in range(n):
-                a[i, j] = dt * jx[i, j]
-            a[i, i] += 1.0
-            for j in range(m):
-                b[i, j] = dt * ju[i, j]
+def model_zoh_nb(rho, alpha, beta, v, omega, v_h, omega_h, d, dt, a, b):
+    """:func:`model_euler_nb` with the exact zero-order-hold discretisation, read off
+    ``expm(dt [[Jx, Ju], [0, 0]])`` (:func:`expm_nb`).
+
+    A separate function, compiled only when a zero-order-hold controller runs (the matrix
+    exponential is ~3 s of compilation)."""
+    jx, ju = jacobians_nb(rho, alpha, beta, v, omega, v_h, omega_h, d)
+    block = np.zeros((NX, NX))
+    for i in range(3):
+        for j in range(3):
+            block[i, j] = dt * jx[i, j]
+        for j in range(NU):
+            block[i, 3 + j] = dt * ju[i, j]
+    e = _expm(block, NX)
+    phi = np.empty((3, 3))
+    gamma = np.empty((3, NU))
+    for i in range(3):
+        for j in range(3):
+            phi[i, j] = e[i, j]
+        for j in range(NU):
+            gamma[i, j] = e[i, 3 + j]
+    _augment(phi, gamma, a, b)
+
+
+def augmented_model(chi, u, w, d: float, dt: float, zoh: bool,
+                    rho_min: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(A_bar, B_bar)``, shapes (5, 5) and (5, 2): the augmented companion model linearised
+    at ``(chi, u, w)`` (rho floored at ``rho_min``), discretised by zero-order hold (``zoh``)
+    or forward Euler; :func:`model_zoh_nb` or :func:`model_euler_nb`."""
+    a, b = np.empty((NX, NX)), np.empty((NX, NU))
+    model = model_zoh_nb if zoh else model_euler_nb
+    model(max(float(chi[0]), rho_min), float(chi[1]), float(chi[2]), float(u[0]), float(u[1]),
+          float(w[0]), float(w[1]), float(d), float(dt), a, b)
     return a, b
 
 
-@njit(**_JIT)
-def augment_nb(a, b):
-    """``(A_bar, B_bar) = ([[A, B], [0, I]], [[B], [I]])``, as :func:`companion.lqr.augment`.
-
-    Parameters
-    ----------
-    a : ndarray, shape (n, n)
-    b : ndarray, shape (n, m)
-
-    Returns
-    -------
-    a_bar : ndarray, shape (n + m, n + m)
-    b_bar : ndarray, shape (n + m, m)
-    """
-    n, m = b.shape
-    a_bar = np.zeros((n + m, n + m))
-    b_bar = np.zeros((n + m, m))
-    for i in range(n):
-        for j in range(n):
-            a_bar[i, j] = a[i, j]
-        for j in range(m):
-            a_bar[i, n + j] = b_bar[i, j] = b[i, j]
-    for i in range(m):
-        a_bar[n + i, n + i] = 1.0
-        b_bar[n + i, i] = 1.0
-    return a_bar, b_bar
-
-
 # ---------------------------------------------------------------------------------------------
-# Riccati equation, stability test and gain
+# Riccati equation, gain and stability
 # ---------------------------------------------------------------------------------------------
+# Fixed sizes: the augmented model has NX = 5 states and NU = 2 inputs, Q and R are diagonal.
+# The call tree is kept flat (dare_gain_nb calls every part itself): numba compiles each
+# function with all the code it calls linked in and optimised again, so every level of
+# nesting costs compilation time again.
 
-@njit(**_JIT)
-def _sda(a, b, q, r, p_out, n, m):
-    """Body of :func:`solve_dare_nb` for an (n, n) ``a`` and (n, m) ``b``."""
-    # G_0 = B R^-1 B', H_0 = Q (both symmetrised), A_0 = A.
-    r_lu = r.copy()
-    piv_m = np.empty(m, np.int64)
-    if not _lu_factor(r_lu, piv_m, m):
-        return False, 0
-    rinv_bt = np.empty((m, n))
-    for i in range(m):
-        for j in range(n):
-            rinv_bt[i, j] = b[j, i]
-    _lu_solve(r_lu, piv_m, rinv_bt, m, n)
-    g = np.empty((n, n))
-    _matmul(b, rinv_bt, g, n, m, n)
-    h = p_out
-    for i in range(n):
-        for j in range(i, n):
-            g[i, j] = g[j, i] = 0.5 * (g[i, j] + g[j, i])
-            h[i, j] = h[j, i] = 0.5 * (q[i, j] + q[j, i])
-    ak = a.copy()
-    w = np.empty((n, n))
-    piv = np.empty(n, np.int64)
-    w_ia = np.empty((n, n))         # W_k^-1 A_k
-    w_ig = np.empty((n, n))         # W_k^-1 G_k
-    tmp = np.empty((n, n))
-    dh = np.empty((n, n))
-    dg = np.empty((n, n))
+@njit(**_INNER)
+def _sda(a, b, q_diag, r_diag, h, ws):
+    """Structure-preserving doubling for the DARE of ``a`` (5, 5), ``b`` (5, 2), ``Q =
+    diag(q_diag)``, ``R = diag(r_diag)``; ``h`` receives the last iterate. ``ws`` is the
+    (>= 9, 5, 5) workspace of :func:`dare_gain_nb`. Returns ``(converged, iterations)``."""
+    g, ak, w, w_ia, w_ig, tmp, dh, at = ws[0], ws[1], ws[2], ws[3], ws[4], ws[5], ws[6], ws[7]
+    for i in range(NX):
+        for j in range(NX):
+            # G_0 = B R^-1 B', H_0 = Q, A_0 = A
+            g[i, j] = b[i, 0] * b[j, 0] / r_diag[0] + b[i, 1] * b[j, 1] / r_diag[1]
+            h[i, j] = 0.0
+            ak[i, j] = a[i, j]
+        h[i, i] = q_diag[i]
+    piv = np.empty(NX, np.int64)
     for it in range(1, DARE_MAX_ITER + 1):
-        _matmul(g, h, w, n, n, n)
-        for i in range(n):
+        _matmul(g, h, w, NX, NX, NX)
+        for i in range(NX):
             w[i, i] += 1.0
-        if not _lu_factor(w, piv, n):
+        if not _lu_factor(w, piv, NX):
             return False, it
-        _copy(ak, w_ia, n, n)
-        _copy(g, w_ig, n, n)
-        _lu_solve(w, piv, w_ia, n, n)
-        _lu_solve(w, piv, w_ig, n, n)
-        _matmul(h, w_ia, tmp, n, n, n)
-        _matmul_tn(ak, tmp, dh, n, n, n)        # A_k' H_k W^-1 A_k
-        _matmul(ak, w_ig, tmp, n, n, n)
-        _matmul(tmp, ak.T, dg, n, n, n)         # A_k W^-1 G_k A_k'
-        _matmul(ak, w_ia, tmp, n, n, n)         # A_{k+1} = A_k W^-1 A_k
-        ak, tmp = tmp, ak
+        for i in range(NX):
+            for j in range(NX):
+                w_ia[i, j] = ak[i, j]
+                w_ig[i, j] = g[i, j]
+                at[i, j] = ak[j, i]
+        _lu_solve(w, piv, w_ia, NX, NX)
+        _lu_solve(w, piv, w_ig, NX, NX)
+        _matmul(h, w_ia, tmp, NX, NX, NX)
+        _matmul(at, tmp, dh, NX, NX, NX)        # A_k' H_k W^-1 A_k
+        _matmul(ak, w_ig, tmp, NX, NX, NX)
+        _matmul(tmp, at, w, NX, NX, NX)         # A_k W^-1 G_k A_k' (W is free now)
+        _matmul(ak, w_ia, tmp, NX, NX, NX)      # A_{k+1} = A_k W^-1 A_k
+        for i in range(NX):
+            for j in range(NX):
+                ak[i, j] = tmp[i, j]
         step = 0.0                              # max |H_{k+1} - H_k|
         size = 0.0                              # max |H_{k+1}|
         total = 0.0                             # not finite iff an entry of G or H is not
-        for i in range(n):
-            for j in range(i, n):
+        for i in range(NX):
+            for j in range(i, NX):
                 x = 0.5 * (dh[i, j] + dh[j, i])
                 h[i, j] = h[j, i] = h[i, j] + x
-                g[i, j] = g[j, i] = g[i, j] + 0.5 * (dg[i, j] + dg[j, i])
+                g[i, j] = g[j, i] = g[i, j] + 0.5 * (w[i, j] + w[j, i])
                 step = max(step, abs(x))
                 size = max(size, abs(h[i, j]))
                 total += h[i, j] + g[i, j]
         if not abs(total) < np.inf:
             return False, it
         if step <= DARE_TOL * size:
-            return _polish(a, b, q, r, h, n, m), it
+            return True, it
     return False, DARE_MAX_ITER
 
 
-@njit(**_JIT)
-def _polish(a, b, q, r, p, n, m):
-    """Newton steps on the converged SDA solution ``p`` (in place), while they converge.
-
-    Normally one step, whose correction is below ``NEWTON_DONE``. Otherwise steps continue
-    while each correction is at most a tenth of the previous one (quadratic convergence) and
-    stop at ``NEWTON_DONE``, when the correction stops shrinking (it has reached the rounding
-    floor of the residual) or after ``NEWTON_MAX_STEPS``. If already the second correction
-    does not shrink, the Newton corrections are rounding noise amplified by an ill-conditioned
-    Stein equation (seen for strongly non-normal closed loops, where they made ``K`` worse by
-    1e3) and the SDA solution is restored. Returns False only if a step fails (non-finite
-    numbers or a closed loop that is not stable).
-    """
-    p_sda = p.copy()
-    last = np.inf
-    for step in range(NEWTON_MAX_STEPS):
-        correction = _newton_step(a, b, q, r, p, n, m)
-        if not correction >= 0.0:
-            return False
-        if correction <= NEWTON_DONE:
-            return True
-        if correction > 0.1 * last:
-            if step == 1:
-                _copy(p_sda, p, n, n)
-            return True
-        last = correction
-    return True
-
-
-@njit(**_JIT)
-def _gain(a, b, r, p, k_out, n, m):
-    """``k_out = (R + B'PB)^-1 B'PA``; False if ``R + B'PB`` is singular."""
-    bt_p = np.empty((m, n))
-    _matmul_tn(b, p, bt_p, m, n, n)
-    s = np.empty((m, m))
-    _matmul(bt_p, b, s, m, n, m)
-    for i in range(m):
-        for j in range(m):
-            s[i, j] += r[i, j]
-    _matmul(bt_p, a, k_out, m, n, n)
-    piv = np.empty(m, np.int64)
-    if not _lu_factor(s, piv, m):
+@njit(**_INNER)
+def _gain(a, b, r_diag, p, k):
+    """``k = (R + B'PB)^-1 B'PA`` (2, 5), the 2x2 system solved in closed form; False if
+    ``R + B'PB`` is singular or a number is not finite."""
+    bt_p = np.empty((NU, NX))
+    for i in range(NU):
+        for j in range(NX):
+            x = 0.0
+            for l in range(NX):
+                x += b[l, i] * p[l, j]
+            bt_p[i, j] = x
+    s00, s01, s10, s11 = r_diag[0], 0.0, 0.0, r_diag[1]
+    for l in range(NX):
+        s00 += bt_p[0, l] * b[l, 0]
+        s01 += bt_p[0, l] * b[l, 1]
+        s10 += bt_p[1, l] * b[l, 0]
+        s11 += bt_p[1, l] * b[l, 1]
+    s01 = 0.5 * (s01 + s10)
+    det = s00 * s11 - s01 * s01
+    if not (det != 0.0 and abs(det) < np.inf):
         return False
-    _lu_solve(s, piv, k_out, m, n)
-    return True
+    finite = True
+    for j in range(NX):
+        x0 = 0.0
+        x1 = 0.0
+        for l in range(NX):
+            x0 += bt_p[0, l] * a[l, j]
+            x1 += bt_p[1, l] * a[l, j]
+        k[0, j] = (s11 * x0 - s01 * x1) / det
+        k[1, j] = (s00 * x1 - s01 * x0) / det
+        finite = finite and abs(k[0, j]) < np.inf and abs(k[1, j]) < np.inf
+    return finite
 
 
-@njit(**_JIT)
-def _closed_loop(a, b, k, out, n, m):
-    """``out = A - B K``."""
-    _matmul(b, k, out, n, m, n)
-    for i in range(n):
-        for j in range(n):
-            out[i, j] = a[i, j] - out[i, j]
+@njit(**_INNER)
+def _closed_loop(a, b, k, out):
+    """``out = A - B K`` (5, 5)."""
+    for i in range(NX):
+        for j in range(NX):
+            out[i, j] = a[i, j] - (b[i, 0] * k[0, j] + b[i, 1] * k[1, j])
 
 
-@njit(**_JIT)
-def _newton_step(a, b, q, r, p, n, m):
+@njit(**_INNER)
+def _newton(a, b, q_diag, r_diag, p, ws):
     """One Newton (Hewer) step on an approximate stabilising DARE solution ``p``, in place.
 
     With ``K = K(P)`` and ``Ac = A - B K``, the correction ``D`` solves the Stein equation
@@ -520,238 +481,200 @@ def _newton_step(a, b, q, r, p, n, m):
     ``P``), by Smith's doubling ``D <- D + M' D M``, ``M <- M^2`` from ``D = residual``,
     ``M = Ac``, until the update is below ``NEWTON_TOL`` times ``D``; ``p`` becomes the Newton
     iterate ``P + D``. Returns ``max|D| / max|P + D|``, or -1 if the Smith doubling does not
-    converge (closed loop not stable) or produces non-finite numbers.
+    converge (closed loop not stable) or produces non-finite numbers. Uses ``ws[0:5]``.
     """
-    k = np.empty((m, n))
-    if not _gain(a, b, r, p, k, n, m):
+    k = np.empty((NU, NX))
+    if not _gain(a, b, r_diag, p, k):
         return -1.0
-    ac = np.empty((n, n))
-    _closed_loop(a, b, k, ac, n, m)
-    tmp = np.empty((n, n))
-    d = np.empty((n, n))
-    _matmul(p, ac, tmp, n, n, n)
-    _matmul_tn(ac, tmp, d, n, n, n)                 # Ac' P Ac
-    rk = np.empty((m, n))
-    _matmul(r, k, rk, m, m, n)
-    krk = np.empty((n, n))
-    _matmul_tn(k, rk, krk, n, m, n)                 # K' R K
-    for i in range(n):
-        for j in range(i, n):
-            x = 0.5 * ((q[i, j] + krk[i, j] + d[i, j]) + (q[j, i] + krk[j, i] + d[j, i]))
-            d[i, j] = d[j, i] = x - p[i, j]
-    mj = ac
-    mm = np.empty((n, n))
-    t = np.empty((n, n))
+    mj, tmp, d, mt, t = ws[0], ws[1], ws[2], ws[3], ws[4]
+    _closed_loop(a, b, k, mj)
+    for i in range(NX):
+        for j in range(NX):
+            mt[i, j] = mj[j, i]
+    _matmul(p, mj, tmp, NX, NX, NX)
+    _matmul(mt, tmp, d, NX, NX, NX)                 # Ac' P Ac
+    for i in range(NX):
+        for j in range(i, NX):
+            krk = r_diag[0] * k[0, i] * k[0, j] + r_diag[1] * k[1, i] * k[1, j]
+            x = 0.5 * (d[i, j] + d[j, i]) + krk - p[i, j]
+            if i == j:
+                x += q_diag[i]
+            d[i, j] = d[j, i] = x
     for _ in range(DARE_MAX_ITER):
-        _matmul(d, mj, tmp, n, n, n)
-        _matmul_tn(mj, tmp, t, n, n, n)             # M' D M
+        _matmul(d, mj, tmp, NX, NX, NX)
+        _matmul(mt, tmp, t, NX, NX, NX)             # M' D M
         step = 0.0
         size = 0.0
-        total = 0.0
-        for i in range(n):
-            for j in range(i, n):
+        for i in range(NX):
+            for j in range(i, NX):
                 x = 0.5 * (t[i, j] + t[j, i])
-                d[i, j] = d[j, i] = d[i, j] + x
+                y = d[i, j] + x
+                d[i, j] = d[j, i] = y
                 step = max(step, abs(x))
-                size = max(size, abs(d[i, j]))
-                total += d[i, j]
-        if not abs(total) < np.inf:
+                size = max(size, abs(y))
+        if not size < np.inf:
             return -1.0
         if step <= NEWTON_TOL * size:
-            for i in range(n):
-                for j in range(n):
+            scale = 0.0
+            for i in range(NX):
+                for j in range(NX):
                     p[i, j] += d[i, j]
-            scale = _max_abs(p, n, n)
+                    scale = max(scale, abs(p[i, j]))
             return size / scale if scale > 0.0 else size
-        _matmul(mj, mj, mm, n, n, n)
-        mj, mm = mm, mj
+        _matmul(mt, mt, tmp, NX, NX, NX)            # (M^2)' = M' M'
+        for i in range(NX):
+            for j in range(NX):
+                mt[i, j] = tmp[i, j]
+                mj[i, j] = tmp[j, i]
     return -1.0
 
 
 @njit(**_JIT)
-def solve_dare_nb(a, b, q, r, p_out):
-    """Stabilising solution of ``P = A'PA - A'PB (R + B'PB)^-1 B'PA + Q`` by doubling (SDA).
+def _radius_status(m, bound, x, y, n):
+    """Whether the spectral radius of the (n, n) ``m`` is below ``bound``, as far as
+    repeated squaring can tell: :data:`GAIN_STABLE` (proved), :data:`GAIN_FAILED` (an entry is
+    not finite) or :data:`GAIN_UNDECIDED` (the eigenvalues must decide). ``x`` and ``y`` are
+    (n, n) scratch.
 
-    Structure-preserving doubling algorithm (Chu, Fan, Lin and Wang 2004), with
-    ``A_0 = A``, ``G_0 = B R^-1 B'``, ``H_0 = Q`` and, for ``W_k = I + G_k H_k``::
+    ``rho(M)^j <= ||M^j||`` for any j and norm: if a power ``M^(2^s)``, s = 1..12, has
+    infinity-norm below 0.5, then ``rho(M) <= 0.5^(1/4096) = 1 - 1.69e-4``, which answers yes
+    for any ``bound`` above that. The 0.5 margin dwarfs the rounding errors of the squarings,
+    which are only continued while the norm stays below 1e3. For the LQR closed loops here a
+    few squarings settle it (~0.1-0.5 us in all, where eigenvalues take ~7 us).
+    """
+    total = 0.0
+    for i in range(n):
+        for j in range(n):
+            x[i, j] = m[i, j]
+            total += abs(m[i, j])
+    if not total < np.inf:
+        return GAIN_FAILED
+    if bound > _SHORTCUT_RADIUS:
+        for _ in range(12):
+            _matmul(x, x, y, n, n, n)
+            nrm = 0.0
+            for i in range(n):
+                row = 0.0
+                for j in range(n):
+                    row += abs(y[i, j])
+                    x[i, j] = y[i, j]
+                nrm = max(nrm, row)
+            if nrm < 0.5:
+                return GAIN_STABLE
+            if not nrm < 1e3:    # also nan
+                break
+    return GAIN_UNDECIDED
 
-        A_{k+1} = A_k W_k^-1 A_k
-        G_{k+1} = G_k + A_k W_k^-1 G_k A_k'
-        H_{k+1} = H_k + A_k' H_k W_k^-1 A_k
 
-    ``H_k`` is the Riccati recursion from ``P = Q`` after ``2^k`` steps and increases
-    monotonically to ``P``. When (A, B) is stabilisable and (Q, A) detectable the
-    convergence is quadratic, the error shrinking like ``rho(A - BK)^(2^(k+1))``. The
-    iteration stops when the largest entry of the update of ``H`` is at most ``DARE_TOL``
-    (1e-8) times the largest entry of ``H``: the updates shrink quadratically, so the next
-    one would be ~1e-14, which the Newton polish removes. Typically 8-11 iterations; close to the
-    stabilisability boundary (closed-loop spectral radius ``1 - eps``) about
-    ``log2(37 / eps)``, e.g. ~35 for ``eps = 1e-9``.
+@njit(**_JIT)
+def dare_gain_nb(a, b, q_diag, r_diag, p, k):
+    """LQR gain of ``(A, B)`` = ``a`` (5, 5), ``b`` (5, 2) with ``Q = diag(q_diag)``,
+    ``R = diag(r_diag)``: the stabilising solution ``P`` of the discrete algebraic Riccati
+    equation ``P = A'PA - A'PB (R + B'PB)^-1 B'PA + Q`` and ``K = (R + B'PB)^-1 B'PA``.
 
-    The converged iterate is then polished by Newton (Hewer) steps (:func:`_polish`), one in
-    the usual case: the doubling accumulates rounding errors that, with ill-scaled weights
-    (say R = diag(0.01, 44)) leave a relative Riccati residual of 1e-11 and a relative error
-    of ``K`` of ~3e-8, and near the stabilisability boundary (a closed-loop pole within ~1e-5
-    of the unit circle) errors of ``P`` up to 1e-4. Checked against a 50-digit reference:
-    after polishing, the relative error of ``K`` was below 2e-10 wherever the closed-loop
-    margin exceeds 1e-6 and below 1e-7 down to a margin of 1e-9, where scipy's
-    ``solve_discrete_are`` was off by up to 0.5 or failed. Where the Newton corrections do not
-    converge (rounding noise of a very ill-conditioned problem) the SDA solution is kept.
+    1. Structure-preserving doubling (SDA; Chu, Fan, Lin and Wang 2004), with ``A_0 = A``,
+       ``G_0 = B R^-1 B'``, ``H_0 = Q`` and, for ``W_k = I + G_k H_k``::
+
+           A_{k+1} = A_k W_k^-1 A_k
+           G_{k+1} = G_k + A_k W_k^-1 G_k A_k'
+           H_{k+1} = H_k + A_k' H_k W_k^-1 A_k
+
+       ``H_k`` is the Riccati recursion from ``P = Q`` after ``2^k`` steps and increases
+       monotonically to ``P``. When (A, B) is stabilisable and (Q, A) detectable the
+       convergence is quadratic, the error shrinking like ``rho(A - BK)^(2^(k+1))``. The
+       iteration stops when the largest entry of the update of ``H`` is at most ``DARE_TOL``
+       (1e-8) times the largest entry of ``H``. Typically 8-11 iterations; close to the
+       stabilisability boundary (closed-loop spectral radius ``1 - eps``) about
+       ``log2(37 / eps)``, e.g. ~35 for ``eps = 1e-9``.
+    2. Newton (Hewer) steps polish the result (:func:`_newton`), normally one, whose
+       correction is below ``NEWTON_DONE``: the doubling accumulates rounding errors that,
+       with ill-scaled weights (say R = diag(0.01, 44)), leave a relative Riccati residual of
+       1e-11 and a relative error of ``K`` of ~3e-8, and near the stabilisability boundary
+       errors of ``P`` up to 1e-4. Steps continue while each correction is at most a tenth
+       of the previous one (quadratic convergence), up to ``NEWTON_MAX_STEPS``. If already
+       the second correction does not shrink, the corrections are rounding noise amplified
+       by an ill-conditioned Stein equation (seen for strongly non-normal closed loops, where
+       they made ``K`` worse by 1e3) and the SDA solution is restored. Checked against a
+       50-digit reference: the relative error of ``K`` was below 2e-10 wherever the
+       closed-loop margin exceeds 1e-6 and below 1e-7 down to a margin of 1e-9, where scipy's
+       ``solve_discrete_are`` was off by up to 0.5 or failed.
+    3. ``K``, and the closed loop ``A - B K`` tested for spectral radius below
+       ``1 - RADIUS_MARGIN`` (the test of :func:`companion.lqr.dlqr`) by repeated squaring
+       (:func:`_radius_status`).
 
     Parameters
     ----------
-    a : ndarray, shape (n, n)
-    b : ndarray, shape (n, m)
-    q : ndarray, shape (n, n)
-        Symmetric positive semi-definite.
-    r : ndarray, shape (m, m)
-        Symmetric positive definite.
-    p_out : ndarray, shape (n, n)
-        Receives ``P`` (the last iterate if not converged).
+    a : ndarray, shape (5, 5)
+    b : ndarray, shape (5, 2)
+    q_diag : ndarray, shape (5,)
+        Diagonal of Q, >= 0.
+    r_diag : ndarray, shape (2,)
+        Diagonal of R, > 0.
+    p : ndarray, shape (5, 5)
+        Receives ``P`` (the last iterate if the doubling did not converge).
+    k : ndarray, shape (2, 5)
+        Receives ``K`` (undefined unless the status is stable or undecided).
 
     Returns
     -------
-    converged : bool
-        False if the doubling did not converge within ``DARE_MAX_ITER`` steps, met a singular
-        ``W_k`` or ``R`` or non-finite numbers, or a Newton step failed. Convergence alone
-        does not prove that ``P`` is stabilising: check the closed loop (as
-        :func:`lqr_gain_nb` does).
+    status : int
+        :data:`GAIN_STABLE`; :data:`GAIN_UNDECIDED` where the squaring cannot prove the
+        closed loop stable (radius within ~1.7e-4 of 1, or a large transient): the caller
+        decides with the eigenvalues (:func:`stabilising_gain`); :data:`GAIN_FAILED` where the
+        doubling did not converge within ``DARE_MAX_ITER`` steps, met a singular ``W_k`` or
+        non-finite numbers, a Newton step failed, or the closed loop is not finite.
     iterations : int
         Number of doubling steps taken.
     """
-    n, m = b.shape
-    return _sda(a, b, q, r, p_out, n, m)
+    ws = np.empty((_WORKSPACE, NX, NX))
+    ok, iterations = _sda(a, b, q_diag, r_diag, p, ws)
+    if not ok:
+        return GAIN_FAILED, iterations
+    p_sda = ws[8]
+    for i in range(NX):
+        for j in range(NX):
+            p_sda[i, j] = p[i, j]
+    last = np.inf
+    for step in range(NEWTON_MAX_STEPS):
+        correction = _newton(a, b, q_diag, r_diag, p, ws)
+        if not correction >= 0.0:
+            return GAIN_FAILED, iterations
+        if correction <= NEWTON_DONE:
+            break
+        if correction > 0.1 * last:
+            if step == 1:
+                for i in range(NX):
+                    for j in range(NX):
+                        p[i, j] = p_sda[i, j]
+            break
+        last = correction
+    if not _gain(a, b, r_diag, p, k):
+        return GAIN_FAILED, iterations
+    _closed_loop(a, b, k, ws[0])
+    return _radius_status(ws[0], 1.0 - RADIUS_MARGIN, ws[1], ws[2], NX), iterations
 
 
-@njit(**_JIT)
-def _radius_below(m, bound, n):
-    """Body of :func:`spectral_radius_below` for an (n, n) ``m``."""
-    if not _max_abs(m, n, n) < np.inf:
-        return False
-    if bound > _SHORTCUT_RADIUS:
-        x = m.copy()
-        y = np.empty((n, n))
-        for _ in range(12):
-            _matmul(x, x, y, n, n, n)
-            nrm = _norm_inf(y, n, n)
-            if nrm < 0.5:
-                return True
-            if not nrm < 1e3:
-                break
-            x, y = y, x
-    return _eig_radius(m) < bound
+def spectral_radius_below(m, bound: float) -> bool:
+    """Whether the spectral radius of the square real ``m`` is below ``bound``: the squaring
+    test of :func:`_radius_status`, and where it cannot decide, the eigenvalues
+    (``numpy.linalg.eigvals``). False also if ``m`` has a non-finite entry."""
+    m = np.array(m, dtype=np.float64, order="C")
+    n = m.shape[0]
+    status = _radius_status(m, float(bound), np.empty_like(m), np.empty_like(m), n)
+    if status == GAIN_UNDECIDED:
+        return float(np.max(np.abs(np.linalg.eigvals(m)))) < bound
+    return status == GAIN_STABLE
 
 
-@njit(**_JIT)
-def _eig_radius(m):
-    """Spectral radius from the eigenvalues (LAPACK ``zgeev``: numba rejects a real matrix
-    whose eigenvalues are complex, so the matrix is passed as complex)."""
-    radius = 0.0
-    for lam in np.linalg.eigvals(m.astype(np.complex128)):
-        radius = max(radius, abs(lam))
-    return radius
-
-
-@njit(**_JIT)
-def spectral_radius_below(m, bound):
-    """Whether the spectral radius of the square real ``m`` is below ``bound``.
-
-    Cheap sufficient test first: ``rho(M)^j <= ||M^j||`` for any j and norm, so if a power
-    ``M^(2^s)``, s = 1..12, computed by repeated squaring, has infinity-norm below 0.5, then
-    ``rho(M) <= 0.5^(1/4096) = 1 - 1.69e-4`` and, for ``bound`` above that, the answer is yes
-    without eigenvalues. The 0.5 margin dwarfs the rounding errors of the squarings, which
-    are only continued while the norm stays below 1e3. Otherwise (slow or no decay, or a
-    large transient) the eigenvalues are computed with LAPACK (``np.linalg.eigvals`` on a
-    complex copy: numba rejects a real matrix with complex eigenvalues) and compared with
-    ``bound``. For the LQR closed loops here the shortcut needs a few squarings (~0.1-0.5 us
-    in all) where the eigenvalues take ~7 us.
-
-    Parameters
-    ----------
-    m : ndarray, shape (n, n)
-    bound : float
-
-    Returns
-    -------
-    bool
-        False also if ``m`` has a non-finite entry.
-    """
-    return _radius_below(m, bound, m.shape[0])
-
-
-@njit(**_JIT)
-def lqr_gain_nb(rho, alpha, beta, v, omega, v_h, omega_h, d, dt, zoh, rho_min,
-                q_diag, r_diag, k_out):
-    """LQR gain ``K`` of the augmented companion model linearised at ``(chi, u, w)``.
-
-    Steps 1-5 of :meth:`companion.control.lqr.LqrController.gain` (see the module docstring),
-    with the Riccati equation solved by :func:`solve_dare_nb`.
-
-    Parameters
-    ----------
-    rho, alpha, beta : float
-        State ``chi`` at which to linearise (rho is floored at ``rho_min``).
-    v, omega : float
-        Robot input ``u``.
-    v_h, omega_h : float
-        Person velocity ``w``.
-    d : float
-        Offset of the reference point (m).
-    dt : float
-        Sample period (s).
-    zoh : bool
-        Zero-order-hold discretisation (True) or forward Euler (False).
-    rho_min : float
-        Floor on rho in the Jacobians.
-    q_diag : ndarray, shape (5,)
-        Diagonal of Q.
-    r_diag : ndarray, shape (2,)
-        Diagonal of R.
-    k_out : ndarray, shape (2, 5)
-        Receives ``K`` (undefined when the function returns False).
-
-    Returns
-    -------
-    bool
-        False where no stabilising gain was found: the SDA or its Newton polish did not
-        converge (see :func:`solve_dare_nb`), a number is not finite, or the closed loop
-        ``A_bar - B_bar K`` has spectral radius >= 1 - 1e-9 (the test of
-        :func:`companion.lqr.dlqr`; see :func:`spectral_radius_below`).
-    """
-    return lqr_gain_p_nb(rho, alpha, beta, v, omega, v_h, omega_h, d, dt, zoh, rho_min,
-                         q_diag, r_diag, k_out, np.empty((5, 5)))
-
-
-@njit(**_JIT)
-def augmented_model_nb(rho, alpha, beta, v, omega, v_h, omega_h, d, dt, zoh, rho_min):
-    """``(A_bar, B_bar)``: the augmented companion model linearised at ``(chi, u, w)`` (rho
-    floored at ``rho_min``), discretised (zero-order hold or forward Euler)."""
-    jx, ju = jacobians_nb(max(rho, rho_min), alpha, beta, v, omega, v_h, omega_h, d)
-    a, b = _discretize(jx, ju, dt, zoh, 3, 2, 5)
-    return augment_nb(a, b)
-
-
-@njit(**_JIT)
-def lqr_gain_p_nb(rho, alpha, beta, v, omega, v_h, omega_h, d, dt, zoh, rho_min,
-                  q_diag, r_diag, k_out, p_out):
-    """:func:`lqr_gain_nb` that also returns the Riccati solution in ``p_out`` (5, 5)."""
-    nx, nu = 5, 2
-    a_bar, b_bar = augmented_model_nb(rho, alpha, beta, v, omega, v_h, omega_h, d, dt, zoh,
-                                      rho_min)
-    q = np.zeros((nx, nx))
-    for i in range(nx):
-        q[i, i] = q_diag[i]
-    r = np.zeros((nu, nu))
-    for i in range(nu):
-        r[i, i] = r_diag[i]
-    ok, _ = _sda(a_bar, b_bar, q, r, p_out, nx, nu)
-    if not (ok and _gain(a_bar, b_bar, r, p_out, k_out, nx, nu)):
-        return False
-    if not _max_abs(k_out, nu, nx) < np.inf:
-        return False
-    closed = np.empty((nx, nx))
-    _closed_loop(a_bar, b_bar, k_out, closed, nx, nu)
-    return _radius_below(closed, 1.0 - RADIUS_MARGIN, nx)
+def stabilising_gain(a: np.ndarray, b: np.ndarray, q_diag: np.ndarray, r_diag: np.ndarray,
+                     p: np.ndarray, k: np.ndarray) -> bool:
+    """:func:`dare_gain_nb`, with the undecided closed loops settled by their eigenvalues:
+    True if ``k`` holds a stabilising gain (spectral radius of ``A - B K`` below
+    ``1 - RADIUS_MARGIN``)."""
+    status, _ = dare_gain_nb(a, b, q_diag, r_diag, p, k)
+    if status == GAIN_UNDECIDED:
+        return spectral_radius_below(a - b @ k, 1.0 - RADIUS_MARGIN)
+    return status == GAIN_STABLE
 
 
 def lqr_gain(chi, u, w, params) -> np.ndarray:
@@ -784,12 +707,11 @@ def lqr_gain(chi, u, w, params) -> np.ndarray:
     if lqr.discretization not in ("euler", "zoh"):
         raise ValueError(f"lqr_gain: discretization must be 'euler' or 'zoh', "
                          f"got {lqr.discretization!r}")
-    k = np.empty((2, 5))
-    ok = lqr_gain_nb(float(chi[0]), float(chi[1]), float(chi[2]), float(u[0]), float(u[1]),
-                     float(w[0]), float(w[1]), float(params.robot.d), float(params.dt),
-                     lqr.discretization == "zoh", float(lqr.rho_min),
-                     np.asarray(lqr.q, dtype=np.float64), np.asarray(lqr.r, dtype=np.float64), k)
-    if not ok:
+    a, b = augmented_model(chi, u, w, params.robot.d, params.dt, lqr.discretization == "zoh",
+                           float(lqr.rho_min))
+    k, p = np.empty((NU, NX)), np.empty((NX, NX))
+    if not stabilising_gain(a, b, np.asarray(lqr.q, dtype=np.float64),
+                            np.asarray(lqr.r, dtype=np.float64), p, k):
         raise np.linalg.LinAlgError("lqr_gain: no stabilising solution of the Riccati equation")
     return k
 
@@ -868,10 +790,15 @@ def lqr_step_config(params) -> np.ndarray:
                      *lqr.error_clip, r.v_max, r.omega_max], dtype=np.float64)
 
 
+#: Layout of the ``op`` array of :func:`lqr_prepare_nb`: the operating point of the gain
+#: (rho floored at ``rho_min``), the person velocity and the feedforward.
+OP_FIELDS = ("rho", "alpha", "beta", "v", "omega", "v_h", "omega_h", "v_d", "omega_d", "beta_d")
+
+
 @njit(**_JIT)
-def lqr_step_nb(rx, ry, rth, hx, hy, hth, hv, hw, config, q_diag, r_diag, memory, gain,
-                rest_gain, xi):
-    """One step of :class:`companion.control.lqr.LqrController` with the compiled gain.
+def lqr_prepare_nb(rx, ry, rth, hx, hy, hth, hv, hw, config, memory, op, xi, a, b):
+    """Steps 1-4 of :meth:`companion.control.lqr.LqrController.step`: relative state,
+    feedforward, operating point and clipped error.
 
     Parameters
     ----------
@@ -881,23 +808,18 @@ def lqr_step_nb(rx, ry, rth, hx, hy, hth, hv, hw, config, q_diag, r_diag, memory
         Person state.
     config : ndarray, shape (13,)
         :func:`lqr_step_config`.
-    q_diag, r_diag : ndarray, shapes (5,) and (2,)
     memory : ndarray, shape (3,)
-        ``[v_e(k-1), omega_e(k-1), has_gain]``, updated in place (``u_e`` from the saturated
-        output; the caller overwrites it with the finally applied command).
-    gain : ndarray, shape (2, 5)
-        Last good gain, updated in place.
-    rest_gain : ndarray, shape (2, 5)
-        Fallback while no gain has been found.
+        ``[v_e(k-1), omega_e(k-1), has_gain]`` (read).
+    op : ndarray, shape (10,)
+        Receives the operating point, person velocity and feedforward (:data:`OP_FIELDS`).
     xi : ndarray, shape (5,)
-        Receives the augmented state.
-
-    Returns
-    -------
-    (v, omega, v_d, omega_d, beta_d) : floats
+        Receives the augmented state ``[rho_e, alpha_e, beta_e, v_e(k-1), omega_e(k-1)]``
+        with the errors clipped to ``lqr.error_clip``.
+    a, b : ndarrays, shapes (5, 5) and (5, 2)
+        Receive the forward-Euler model at ``op`` (:func:`model_euler_nb`); a zero-order-hold
+        controller replaces it with :func:`model_zoh_nb`.
     """
-    d, dt, zoh, rho_min = config[0], config[1], config[2] != 0.0, config[3]
-    rho_d, alpha_d = config[4], config[5]
+    d, dt, rho_min, rho_d, alpha_d = config[0], config[1], config[3], config[4], config[5]
     rho, alpha, beta = relative_state_nb(rx, ry, rth, hx, hy, hth, d)
     if config[6] != 0.0:
         beta_d, v_d, omega_d = slot_reference_nb(hv, hw, rho_d, alpha_d, d)
@@ -905,32 +827,47 @@ def lqr_step_nb(rx, ry, rth, hx, hy, hth, hv, hw, config, q_diag, r_diag, memory
         beta_d, v_d, omega_d = 0.0, hv, hw
     e_v, e_w = memory[0], memory[1]
     if config[7] != 0.0:
-        lin = (rho, alpha, beta, v_d + e_v, omega_d + e_w)
+        op[0], op[1], op[2], op[3], op[4] = rho, alpha, beta, v_d + e_v, omega_d + e_w
     else:
-        lin = (rho_d, alpha_d, beta_d, v_d, omega_d)
-    k = np.empty((2, 5))
-    if lqr_gain_nb(lin[0], lin[1], lin[2], lin[3], lin[4], hv, hw, d, dt, zoh, rho_min,
-                   q_diag, r_diag, k):
-        _copy(k, gain, 2, 5)
-        memory[2] = 1.0
-    elif memory[2] == 0.0:
-        _copy(rest_gain, gain, 2, 5)
-        memory[2] = 1.0
+        op[0], op[1], op[2], op[3], op[4] = rho_d, alpha_d, beta_d, v_d, omega_d
+    op[0] = max(op[0], rho_min)
+    op[5], op[6], op[7], op[8], op[9] = hv, hw, v_d, omega_d, beta_d
     xi[0] = min(max(rho - rho_d, -config[8]), config[8])
     xi[1] = min(max(wrap_pi_nb(alpha - alpha_d), -config[9]), config[9])
     xi[2] = min(max(wrap_pi_nb(beta - beta_d), -config[10]), config[10])
     xi[3] = e_v
     xi[4] = e_w
+    model_euler_nb(op[0], op[1], op[2], op[3], op[4], hv, hw, d, dt, a, b)
+
+
+@njit(**_JIT)
+def lqr_output_nb(found, k, gain, rest_gain, memory, xi, op, config):
+    """Step 5 of :meth:`companion.control.lqr.LqrController.step`: ``u = u_d + u_e(k-1) -
+    K xi`` clipped to the input limits.
+
+    ``gain`` (2, 5) becomes ``k`` if ``found`` (a stabilising gain), else keeps the last good
+    gain, or becomes ``rest_gain`` if there is none yet (``memory[2]`` 0). ``memory[:2]``
+    becomes ``u_e(k)`` of the saturated output (the caller overwrites it with the finally
+    applied command). ``xi`` and ``op`` are those of :func:`lqr_prepare_nb`. Returns
+    ``(v, omega)``.
+    """
+    if found or memory[2] == 0.0:
+        new = k if found else rest_gain
+        for i in range(NU):
+            for j in range(NX):
+                gain[i, j] = new[i, j]
+        memory[2] = 1.0
     du_v = 0.0
     du_w = 0.0
-    for j in range(5):
+    for j in range(NX):
         du_v += gain[0, j] * xi[j]
         du_w += gain[1, j] * xi[j]
-    v = min(max(v_d + e_v - du_v, -config[11]), config[11])
-    om = min(max(omega_d + e_w - du_w, -config[12]), config[12])
+    v_d, omega_d = op[7], op[8]
+    v = min(max(v_d + xi[3] - du_v, -config[11]), config[11])
+    om = min(max(omega_d + xi[4] - du_w, -config[12]), config[12])
     memory[0] = v - v_d
     memory[1] = om - omega_d
-    return v, om, v_d, omega_d, beta_d
+    return v, om
 
 
 # -- many Riccati equations at once (batch simulation) ----------------------------------------
@@ -1094,11 +1031,11 @@ def newton_lanes(a, b, q_diag, r_diag, p, active, lanes, corr):
 
 
 @njit(**_JIT)
-def stable_lanes(a, b, k, lanes, ok):
-    """Whether each lane's closed loop ``A - B K`` has spectral radius below
-    ``1 - RADIUS_MARGIN``, as :func:`spectral_radius_below` decides it: the squaring shortcut
-    for all lanes at once, the eigenvalues for the lanes it cannot settle. ``a`` (5, 5, L),
-    ``b`` (5, 2, L), ``k`` (2, 5, L); ``ok`` (L,) receives the answers."""
+def stable_lanes(a, b, k, lanes, status):
+    """:func:`_radius_status` of each lane's closed loop ``A - B K`` with the bound
+    ``1 - RADIUS_MARGIN``, the squarings done for all lanes at once. ``a`` (5, 5, L), ``b``
+    (5, 2, L), ``k`` (2, 5, L); ``status`` (L,) receives :data:`GAIN_STABLE`,
+    :data:`GAIN_FAILED` or :data:`GAIN_UNDECIDED` (the eigenvalues must decide)."""
     n = a.shape[0]
     x = np.empty((n, n, lanes))
     y = np.empty((n, n, lanes))
@@ -1106,14 +1043,17 @@ def stable_lanes(a, b, k, lanes, ok):
         for j in range(n):
             for e in range(lanes):
                 x[i, j, e] = a[i, j, e] - (b[i, 0, e] * k[0, j, e] + b[i, 1, e] * k[1, j, e])
-    closed = x.copy()
     pending = np.zeros(lanes, np.bool_)
     nrm = np.empty(lanes)
     row = np.empty(lanes)
     for e in range(lanes):
-        ok[e] = False
-        pending[e] = _max_abs(closed[:, :, e].copy(), n, n) < np.inf
-    scalar = pending.copy()      # lanes to settle one by one if the shortcut does not
+        finite = True
+        for i in range(n):
+            for j in range(n):
+                if not abs(x[i, j, e]) < np.inf:
+                    finite = False
+        status[e] = GAIN_UNDECIDED if finite else GAIN_FAILED
+        pending[e] = finite
     if 1.0 - RADIUS_MARGIN > _SHORTCUT_RADIUS:
         for _ in range(12):
             _mm_lanes(x, x, y, n, n, lanes)
@@ -1131,9 +1071,8 @@ def stable_lanes(a, b, k, lanes, ok):
             for e in range(lanes):
                 if pending[e]:
                     if nrm[e] < 0.5:
-                        ok[e] = True
+                        status[e] = GAIN_STABLE
                         pending[e] = False
-                        scalar[e] = False
                     elif not nrm[e] < 1e3:
                         pending[e] = False
                     else:
@@ -1141,6 +1080,3 @@ def stable_lanes(a, b, k, lanes, ok):
             if not left:
                 break
             x, y = y, x
-    for e in range(lanes):
-        if scalar[e]:
-            ok[e] = _radius_below(closed[:, :, e].copy(), 1.0 - RADIUS_MARGIN, n)

@@ -155,14 +155,16 @@ def lane_problems(n, seed, spread):
                        rng.uniform(-0.5, 0.5), rng.uniform(0.3, 1.4), rng.uniform(-0.5, 0.5),
                        rng.uniform(0.3, 1.4), rng.uniform(-0.4, 0.4)])
         near = op + spread * rng.standard_normal(7)
-        args = (0.25, 0.05, False, 0.2, q, r)
         k = np.empty((2, 5))
         p = np.empty((5, 5))
-        assert fastlqr.lqr_gain_p_nb(*near, *args, k, p)
+        a_near, b_near = fastlqr.augmented_model(near[:3], near[3:5], near[5:], 0.25, 0.05,
+                                                 False, 0.2)
+        assert fastlqr.stabilising_gain(a_near, b_near, q, r, p, k)
         p_warm[:, :, e] = p
-        assert fastlqr.lqr_gain_p_nb(*op, *args, k, p)
+        a_op, b_op = fastlqr.augmented_model(op[:3], op[3:5], op[5:], 0.25, 0.05, False, 0.2)
+        assert fastlqr.stabilising_gain(a_op, b_op, q, r, p, k)
         k_ref[:, :, e] = k
-        a[:, :, e], b[:, :, e] = fastlqr.augmented_model_nb(*op, 0.25, 0.05, False, 0.2)
+        a[:, :, e], b[:, :, e] = a_op, b_op
     return a, b, np.tile(q[:, None], (1, n)), np.tile(r[:, None], (1, n)), p_warm, k_ref
 
 
@@ -182,12 +184,14 @@ def test_warm_newton_lanes_reach_the_cold_gain(spread):
     fastlqr._gain_lanes(a, b, rd, p, k, n)
     scale = np.max(np.abs(k_ref), axis=(0, 1))
     assert np.max(np.max(np.abs(k - k_ref), axis=(0, 1)) / scale) < 1e-10
-    ok = np.empty(n, np.bool_)
-    fastlqr.stable_lanes(a, b, k, n, ok)
-    assert ok.all()
+    status = np.empty(n, np.int64)
+    fastlqr.stable_lanes(a, b, k, n, status)
+    assert (status == fastlqr.GAIN_STABLE).all()
 
 
 def test_stable_lanes_decides_as_the_scalar_test():
+    """The same status as the scalar squaring test, and where it decides, the same answer as
+    the eigenvalues."""
     rng = np.random.default_rng(3)
     n = 40
     a = rng.standard_normal((5, 5, n)) * rng.uniform(0.05, 0.5, n)
@@ -195,9 +199,15 @@ def test_stable_lanes_decides_as_the_scalar_test():
         a[:, :, e] = np.diag(rng.uniform(0.9, 1.1, 5))
     b = np.zeros((5, 2, n))
     k = np.zeros((2, 5, n))
-    ok = np.empty(n, np.bool_)
-    fastlqr.stable_lanes(a, b, k, n, ok)
-    expected = [fastlqr.spectral_radius_below(a[:, :, e].copy(), 1.0 - fastlqr.RADIUS_MARGIN)
-                for e in range(n)]
-    assert ok.tolist() == expected
+    status = np.empty(n, np.int64)
+    fastlqr.stable_lanes(a, b, k, n, status)
+    bound = 1.0 - fastlqr.RADIUS_MARGIN
+    scalar = [fastlqr._radius_status(a[:, :, e].copy(), bound, np.empty((5, 5)),
+                                     np.empty((5, 5)), 5) for e in range(n)]
+    assert status.tolist() == scalar
+    expected = [fastlqr.spectral_radius_below(a[:, :, e], bound) for e in range(n)]
+    for e in range(n):
+        if status[e] != fastlqr.GAIN_UNDECIDED:
+            assert (status[e] == fastlqr.GAIN_STABLE) == expected[e]
     assert 0 < sum(expected) < n
+    assert fastlqr.GAIN_UNDECIDED in scalar and fastlqr.GAIN_STABLE in scalar

@@ -25,7 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.control.base import Command, Observation, saturate
-from companion.fastlqr import lqr_gain_nb, lqr_step_config, lqr_step_nb
+from companion.fastlqr import (OP_FIELDS, lqr_gain, lqr_output_nb, lqr_prepare_nb,
+                               lqr_step_config, model_zoh_nb, stabilising_gain)
 from companion.kinematics import wrap_pi
 from companion.lqr import augment, dlqr
 from companion.model import discretize, jacobians, relative_state, slot_reference
@@ -48,8 +49,10 @@ class LqrStep:
 class LqrController:
     """Augmented-state LQR companion controller; see the module docstring.
 
-    With ``lqr.solver = "compiled"`` (default) a step is one call of
-    :func:`companion.fastlqr.lqr_step_nb`; with ``"scipy"`` the same step runs in Python with
+    With ``lqr.solver = "compiled"`` (default) a step is three compiled calls:
+    :func:`companion.fastlqr.lqr_prepare_nb` (relative state, feedforward, model),
+    :func:`companion.fastlqr.stabilising_gain` (Riccati equation and gain) and
+    :func:`companion.fastlqr.lqr_output_nb`; with ``"scipy"`` the same step runs in Python with
     scipy's Riccati solver (the reference; tests/test_fastlqr.py checks they agree).
     """
 
@@ -74,6 +77,10 @@ class LqrController:
         self._memory = np.zeros(3)    # [v_e(k-1), omega_e(k-1), 1 once a gain is known]
         self._gain = np.zeros((2, 5))
         self._xi = np.zeros(5)
+        # Buffers of the compiled step (operating point, model, Riccati solution, gain).
+        self._op = np.zeros(len(OP_FIELDS))
+        self._a, self._b = np.zeros((5, 5)), np.zeros((5, 2))
+        self._p, self._k = np.zeros((5, 5)), np.zeros((2, 5))
         self.reset()
 
     def reset(self) -> None:
@@ -115,12 +122,7 @@ class LqrController:
         """
         p = self.params
         if self._compiled:
-            k = np.empty((2, 5))
-            if not lqr_gain_nb(float(chi[0]), float(chi[1]), float(chi[2]), float(u[0]),
-                               float(u[1]), float(w[0]), float(w[1]), p.robot.d, p.dt,
-                               self._zoh, p.lqr.rho_min, self._q_diag, self._r_diag, k):
-                raise np.linalg.LinAlgError("no stabilising solution of the Riccati equation")
-            return k
+            return lqr_gain(chi, u, w, p)
         lin = np.array([max(chi[0], p.lqr.rho_min), chi[1], chi[2]])
         jx, ju = jacobians(lin, np.asarray(u, dtype=float), np.asarray(w, dtype=float),
                            p.robot.d)
@@ -131,16 +133,22 @@ class LqrController:
 
     def step(self, obs: Observation) -> Command:
         r, h = obs.robot, obs.person
-        if self._compiled:
-            v, om, v_d, omega_d, beta_d = lqr_step_nb(
-                r.x, r.y, r.theta, h.x, h.y, h.theta, h.v, h.omega, self._config,
-                self._q_diag, self._r_diag, self._memory, self._gain, self._rest_gain, self._xi)
-            self._ref = (v_d, omega_d, beta_d)
-            return Command(v, om)
-        return self._step_reference(r, h)
+        if not self._compiled:
+            return self._step_reference(r, h)
+        op, a, b = self._op, self._a, self._b
+        lqr_prepare_nb(r.x, r.y, r.theta, h.x, h.y, h.theta, h.v, h.omega, self._config,
+                       self._memory, op, self._xi, a, b)
+        if self._zoh:
+            model_zoh_nb(op[0], op[1], op[2], op[3], op[4], op[5], op[6], self._config[0],
+                         self._config[1], a, b)
+        found = stabilising_gain(a, b, self._q_diag, self._r_diag, self._p, self._k)
+        v, om = lqr_output_nb(found, self._k, self._gain, self._rest_gain, self._memory,
+                              self._xi, op, self._config)
+        self._ref = (float(op[7]), float(op[8]), float(op[9]))
+        return Command(v, om)
 
     def _step_reference(self, r, h) -> Command:
-        """The step in Python with the configured (scipy) gain: what ``lqr_step_nb`` does."""
+        """The step in Python with the configured (scipy) gain: what the compiled step does."""
         p = self.params
         rho, alpha, beta = relative_state(r.x, r.y, r.theta, h.x, h.y, h.theta, p.robot.d)
         beta_d, v_d, omega_d = self.reference(h.v, h.omega)

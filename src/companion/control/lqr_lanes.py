@@ -21,41 +21,22 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from companion.fastlqr import (LANES_DONE, LANES_MAX_STEPS, _gain_lanes, augmented_model_nb,
-                               jacobians_nb, lqr_gain_p_nb, newton_lanes, relative_state_nb,
-                               slot_reference_nb, stable_lanes, wrap_pi_nb)
+from companion.fastlqr import (GAIN_STABLE, LANES_DONE, LANES_MAX_STEPS, _gain_lanes,
+                               model_euler_nb, model_zoh_nb, newton_lanes, relative_state_nb,
+                               slot_reference_nb, stabilising_gain, stable_lanes, wrap_pi_nb)
 
 _NB = {"cache": True, "nogil": True, "error_model": "numpy"}
 
 
 @njit(**_NB)
-def _lane_model(a, b, j, op0, op1, op2, op3, op4, v_h, omega_h, d, dt, zoh, rho_min):
-    """Write lane ``j`` of the block's ``a`` (5, 5, L) and ``b`` (5, 2, L): the augmented
-    model of :func:`companion.fastlqr.augmented_model_nb`."""
-    if zoh:
-        a_bar, b_bar = augmented_model_nb(op0, op1, op2, op3, op4, v_h, omega_h, d, dt, True,
-                                          rho_min)
-        for r in range(5):
-            for c in range(5):
-                a[r, c, j] = a_bar[r, c]
-            for c in range(2):
-                b[r, c, j] = b_bar[r, c]
-        return
-    jx, ju = jacobians_nb(max(op0, rho_min), op1, op2, op3, op4, v_h, omega_h, d)
+def _to_lane(a2, b2, a, b, j):
+    """Copy the model ``a2`` (5, 5), ``b2`` (5, 2) into lane ``j`` of a block's ``a``
+    (5, 5, L) and ``b`` (5, 2, L)."""
     for r in range(5):
         for c in range(5):
-            a[r, c, j] = 0.0
+            a[r, c, j] = a2[r, c]
         for c in range(2):
-            b[r, c, j] = 0.0
-    for r in range(3):
-        for c in range(3):
-            a[r, c, j] = dt * jx[r, c]
-        a[r, r, j] += 1.0
-        for c in range(2):
-            a[r, 3 + c, j] = b[r, c, j] = dt * ju[r, c]
-    for r in range(2):
-        a[3 + r, 3 + r, j] = 1.0
-        b[3 + r, r, j] = 1.0
+            b[r, c, j] = b2[r, c]
 
 
 @njit(**_NB)
@@ -63,6 +44,7 @@ def _prepare(idx, observed, pose, config, mem, ref, err, lin, a, b, warm, active
     """Per lane: feedforward, errors, operating point and model from the observed person
     ``observed[lane]`` (x, y, theta, v, omega) and robot ``pose[lane]`` (x, y, theta)."""
     block = a.shape[3]
+    a2, b2 = np.empty((5, 5)), np.empty((5, 2))
     for lane in range(idx.size):
         g = idx[lane]
         active[lane] = False
@@ -88,10 +70,26 @@ def _prepare(idx, observed, pose, config, mem, ref, err, lin, a, b, warm, active
             op = (rho_d, alpha_d, beta_d, v_d, omega_d)
         lin[lane, 0], lin[lane, 1], lin[lane, 2], lin[lane, 3], lin[lane, 4] = op
         lin[lane, 5], lin[lane, 6] = hv, hw
-        blk, j = lane // block, lane % block
-        _lane_model(a[blk], b[blk], j, op[0], op[1], op[2], op[3], op[4], hv, hw, d, c[1],
-                    c[2] != 0.0, c[3])
+        model_euler_nb(max(op[0], c[3]), op[1], op[2], op[3], op[4], hv, hw, d, c[1], a2, b2)
+        _to_lane(a2, b2, a[lane // block], b[lane // block], lane % block)
         active[lane] = warm[lane]
+
+
+@njit(**_NB)
+def _zoh_models(idx, config, lin, a, b):
+    """Replace the forward-Euler model of :func:`_prepare` by the zero-order-hold one in the
+    lanes whose controller asks for it (a separate kernel: the matrix exponential is compiled
+    only when such a lane runs)."""
+    block = a.shape[3]
+    a2, b2 = np.empty((5, 5)), np.empty((5, 2))
+    for lane in range(idx.size):
+        g = idx[lane]
+        if g < 0 or config[g, 2] == 0.0:
+            continue
+        c, op = config[g], lin[lane]
+        model_zoh_nb(max(op[0], c[3]), op[1], op[2], op[3], op[4], op[5], op[6], c[0], c[1],
+                     a2, b2)
+        _to_lane(a2, b2, a[lane // block], b[lane // block], lane % block)
 
 
 @njit(**_NB)
@@ -137,17 +135,19 @@ def _solve(a, b, qd, rd, p, p_prev, history, k, active, corr):
 
 @njit(**_NB)
 def _check(idx, a, b, k, corr, warm, history, gain, has_gain, need_cold):
-    """Accept each warm lane's gain if it converged and stabilises; else flag a cold solve."""
+    """Accept each warm lane's gain if it converged and the squaring test proves it
+    stabilising; else flag a cold solve (which settles undecided closed loops by their
+    eigenvalues)."""
     blocks, block = a.shape[0], a.shape[3]
-    stable = np.empty(block, np.bool_)
+    status = np.empty(block, np.int64)
     for blk in range(blocks):
-        stable_lanes(a[blk], b[blk], k[blk], block, stable)
+        stable_lanes(a[blk], b[blk], k[blk], block, status)
         for j in range(block):
             lane = blk * block + j
             need_cold[lane] = False
             if idx[lane] < 0:
                 continue
-            if warm[lane] and corr[blk, j] == 0.0 and stable[j]:
+            if warm[lane] and corr[blk, j] == 0.0 and status[j] == GAIN_STABLE:
                 for r in range(2):
                     for c in range(5):
                         gain[lane, r, c] = k[blk, r, c, j]
@@ -233,20 +233,21 @@ class LaneSet:
         self.pose = np.zeros((n, 3))           # robot x, y, theta (input)
 
 
-def _cold(lanes: LaneSet, config: np.ndarray, q_diag: np.ndarray, r_diag: np.ndarray,
+def _cold(lanes: LaneSet, q_diag: np.ndarray, r_diag: np.ndarray,
           rest_gain: np.ndarray) -> None:
-    """The scalar cold solver for the lanes :func:`_check` flagged; a lane without any
-    stabilising gain keeps its last one (or gets ``rest_gain``)."""
+    """The scalar solver (:func:`companion.fastlqr.stabilising_gain`, cold doubling) for the
+    lanes :func:`_check` flagged, on the lane's model; a lane without any stabilising gain
+    keeps its last one (or gets ``rest_gain``)."""
     if not lanes.need_cold.any():
         return
     k_cold = np.empty((2, 5))
     p_cold = np.empty((5, 5))
     for lane in np.flatnonzero(lanes.need_cold):
         g = lanes.idx[lane]
-        c, op = config[g], lanes.lin[lane]
         blk, j = divmod(int(lane), lanes.block)
-        if lqr_gain_p_nb(op[0], op[1], op[2], op[3], op[4], op[5], op[6], c[0], c[1],
-                         c[2] != 0.0, c[3], q_diag[g], r_diag[g], k_cold, p_cold):
+        a = np.ascontiguousarray(lanes.a[blk, :, :, j])
+        b = np.ascontiguousarray(lanes.b[blk, :, :, j])
+        if stabilising_gain(a, b, q_diag[g], r_diag[g], p_cold, k_cold):
             lanes.gain[lane] = k_cold
             lanes.has_gain[lane] = True
             lanes.p[blk, :, :, j] = p_cold
@@ -268,7 +269,9 @@ def step_lanes(lanes: LaneSet, config: np.ndarray, q_diag: np.ndarray, r_diag: n
     L = lanes
     _prepare(L.idx, L.observed, L.pose, config, L.mem, L.ref, L.err, L.lin, L.a, L.b, L.warm,
              L.active)
+    if config[:, 2].any():
+        _zoh_models(L.idx, config, L.lin, L.a, L.b)
     _solve(L.a, L.b, L.qd, L.rd, L.p, L.p_prev, L.history, L.k, L.active, L.corr)
     _check(L.idx, L.a, L.b, L.k, L.corr, L.warm, L.history, L.gain, L.has_gain, L.need_cold)
-    _cold(L, config, q_diag, r_diag, rest_gain)
+    _cold(L, q_diag, r_diag, rest_gain)
     _control(L.idx, config, L.gain, L.mem, L.ref, L.err, L.xi, L.vw)
