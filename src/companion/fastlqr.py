@@ -883,6 +883,13 @@ def lqr_output_nb(found, k, gain, rest_gain, memory, xi, op, config):
 #: is then of the order of its square (quadratic convergence), ~1e-12 and less.
 LANES_DONE = 1e-9
 LANES_MAX_STEPS = 5
+#: ... or when its next correction, predicted from the quadratic convergence with a safety
+#: factor, is below LANES_PREDICTED (see companion.control.lqr_lanes._solve). On the
+#: figure-8 the measured ratio of a correction to the square of the previous one was 0.2-2.2.
+LANES_PREDICTED = 1e-12
+LANES_SAFETY = 4.0
+LANES_QUAD_DECAY = 0.9
+LANES_QUAD_MIN = 1e-7
 #: The Stein equation of a Newton step is solved to this relative accuracy, so that the
 #: truncation (this times the correction) stays below the Newton error.
 LANES_SMITH_TOL = 1e-7

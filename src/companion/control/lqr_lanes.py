@@ -21,7 +21,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from companion.fastlqr import (GAIN_STABLE, LANES_DONE, LANES_MAX_STEPS, _gain_lanes,
+from companion.fastlqr import (GAIN_STABLE, LANES_DONE, LANES_MAX_STEPS, LANES_PREDICTED,
+                               LANES_QUAD_DECAY, LANES_QUAD_MIN, LANES_SAFETY, _gain_lanes,
                                model_euler_nb, model_zoh_nb, newton_lanes, relative_state_nb,
                                slot_reference_nb, stabilising_gain, stable_lanes, wrap_pi_nb)
 
@@ -93,39 +94,91 @@ def _zoh_models(idx, config, lin, a, b):
 
 
 @njit(**_NB)
-def _solve(a, b, qd, rd, p, p_prev, history, k, active, corr):
-    """Newton steps on the warm (``active``) lanes of every block, from the solution of the
-    previous period, or, after two solved periods in a row (``history`` 2), from the linear
-    extrapolation ``2 P(k-1) - P(k-2)``. ``corr`` ends 0 where a lane converged and inf
-    elsewhere; ``k`` gets each lane's gain from its ``p``."""
+def _warm_start(p, past, history, lane, j):
+    """Replace ``p[:, :, j]`` = P(t-1) by the prediction of P(t) and shift it into
+    ``past[:, :, :, j]`` (P(t-2), P(t-3), P(t-4)), for a lane with ``history`` solved periods
+    in a row.
+
+    The prediction is the polynomial extrapolation of order 0 (``P(t-1)``), 1
+    (``2 P(t-1) - P(t-2)``) or 2 (``3 P(t-1) - 3 P(t-2) + P(t-3)``) that would have predicted
+    ``P(t-1)`` best from the periods before (order 1 after two periods, as nothing can be
+    compared yet). On smooth motion that is order 2 (first Newton correction ~1e-6 of P
+    instead of ~3e-5 with order 1 on the figure-8); with sensor noise, order 0 (the
+    extrapolations amplify the noise)."""
+    h = history[lane]
+    order = 0
+    if h == 2:
+        order = 1
+    elif h >= 3:
+        e0 = 0.0
+        e1 = 0.0
+        e2 = 0.0 if h >= 4 else np.inf
+        for r in range(5):
+            for c in range(5):
+                p1, p2, p3, p4 = p[r, c, j], past[0, r, c, j], past[1, r, c, j], past[2, r, c, j]
+                e0 = max(e0, abs(p1 - p2))
+                e1 = max(e1, abs(p1 - (2.0 * p2 - p3)))
+                if h >= 4:
+                    e2 = max(e2, abs(p1 - (3.0 * p2 - 3.0 * p3 + p4)))
+        order = 0 if e0 <= min(e1, e2) else (1 if e1 <= e2 else 2)
+    for r in range(5):
+        for c in range(5):
+            p1, p2, p3 = p[r, c, j], past[0, r, c, j], past[1, r, c, j]
+            if order == 1:
+                p[r, c, j] = 2.0 * p1 - p2
+            elif order == 2:
+                p[r, c, j] = 3.0 * p1 - 3.0 * p2 + p3
+            past[2, r, c, j] = p3
+            past[1, r, c, j] = p2
+            past[0, r, c, j] = p1
+
+
+@njit(**_NB)
+def _solve(a, b, qd, rd, p, past, history, quad, k, active, corr):
+    """Newton steps on the warm (``active``) lanes of every block, from the prediction of
+    :func:`_warm_start`. ``corr`` ends 0 where a lane converged and inf elsewhere; ``k`` gets
+    each lane's gain from its ``p``.
+
+    A lane has converged after a step whose relative correction ``c`` is at most
+    ``LANES_DONE``, or when the next correction, predicted by the quadratic convergence of
+    Newton's method as ``quad c^2``, is below ``LANES_PREDICTED`` even with a safety factor
+    ``LANES_SAFETY`` (the error left in P is of the order of that next correction).
+    ``quad`` (per lane) is the largest recent ratio of a correction to the square of the one
+    before, decaying by ``LANES_QUAD_DECAY`` per period; it is only measured from corrections
+    above ``LANES_QUAD_MIN``, where rounding does not dominate the next one."""
     blocks, block = a.shape[0], a.shape[3]
     converged = np.zeros(block, np.bool_)
     step_corr = np.empty(block)
+    last = np.empty(block)
     for blk in range(blocks):
         act = active[blk * block:(blk + 1) * block]
         for j in range(block):
             converged[j] = False
-            if not act[j]:
-                continue
-            extrapolate = history[blk * block + j] >= 2
-            for r in range(5):
-                for c in range(5):
-                    x = p[blk, r, c, j]
-                    if extrapolate:
-                        p[blk, r, c, j] = 2.0 * x - p_prev[blk, r, c, j]
-                    p_prev[blk, r, c, j] = x
+            last[j] = np.inf
+            if act[j]:
+                lane = blk * block + j
+                _warm_start(p[blk], past[blk], history, lane, j)
+                quad[lane] *= LANES_QUAD_DECAY
         for _ in range(LANES_MAX_STEPS):
             newton_lanes(a[blk], b[blk], qd[blk], rd[blk], p[blk], act, block, step_corr)
             left = False
             for j in range(block):
-                if act[j]:
-                    if step_corr[j] <= LANES_DONE:
-                        act[j] = False
-                        converged[j] = True
-                    elif not step_corr[j] < np.inf:
-                        act[j] = False
-                    else:
-                        left = True
+                if not act[j]:
+                    continue
+                lane = blk * block + j
+                c = step_corr[j]
+                if not c < np.inf:
+                    act[j] = False
+                    continue
+                if last[j] >= LANES_QUAD_MIN and last[j] < np.inf:
+                    quad[lane] = max(quad[lane], c / (last[j] * last[j]))
+                predicted = LANES_SAFETY * quad[lane] * c * c   # 0 while quad is unknown
+                if c <= LANES_DONE or 0.0 < predicted <= LANES_PREDICTED:
+                    act[j] = False
+                    converged[j] = True
+                else:
+                    last[j] = c
+                    left = True
             if not left:
                 break
         for j in range(block):
@@ -152,7 +205,7 @@ def _check(idx, a, b, k, corr, warm, history, gain, has_gain, need_cold):
                     for c in range(5):
                         gain[lane, r, c] = k[blk, r, c, j]
                 has_gain[lane] = True
-                history[lane] = min(history[lane] + 1, 2)
+                history[lane] = min(history[lane] + 1, 4)
             else:
                 need_cold[lane] = True
 
@@ -208,7 +261,8 @@ class LaneSet:
         self.a = np.zeros((blocks, 5, 5, block))
         self.b = np.zeros((blocks, 5, 2, block))
         self.p = np.zeros((blocks, 5, 5, block))
-        self.p_prev = np.zeros((blocks, 5, 5, block))
+        self.past = np.zeros((blocks, 3, 5, 5, block))   # P of the 3 periods before p's
+        self.quad = np.zeros(n)                # quadratic-convergence constant (see _solve)
         self.k = np.zeros((blocks, 2, 5, block))
         self.qd = np.ones((blocks, 5, block))
         self.rd = np.ones((blocks, 2, block))
@@ -217,7 +271,7 @@ class LaneSet:
             self.qd[blk, :, j] = q_diag[idx[lane]]
             self.rd[blk, :, j] = r_diag[idx[lane]]
         self.corr = np.zeros((blocks, block))
-        self.history = np.zeros(n, np.int64)   # solved periods in a row (up to 2)
+        self.history = np.zeros(n, np.int64)   # solved periods in a row (up to 4)
         self.warm = np.zeros(n, np.bool_)      # p holds the previous period's solution
         self.active = np.zeros(n, np.bool_)
         self.need_cold = np.zeros(n, np.bool_)
@@ -271,7 +325,7 @@ def step_lanes(lanes: LaneSet, config: np.ndarray, q_diag: np.ndarray, r_diag: n
              L.active)
     if config[:, 2].any():
         _zoh_models(L.idx, config, L.lin, L.a, L.b)
-    _solve(L.a, L.b, L.qd, L.rd, L.p, L.p_prev, L.history, L.k, L.active, L.corr)
+    _solve(L.a, L.b, L.qd, L.rd, L.p, L.past, L.history, L.quad, L.k, L.active, L.corr)
     _check(L.idx, L.a, L.b, L.k, L.corr, L.warm, L.history, L.gain, L.has_gain, L.need_cold)
     _cold(L, q_diag, r_diag, rest_gain)
     _control(L.idx, config, L.gain, L.mem, L.ref, L.err, L.xi, L.vw)
