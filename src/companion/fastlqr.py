@@ -895,7 +895,7 @@ LANES_QUAD_MIN = 1e-7
 LANES_SMITH_TOL = 1e-7
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _mm_lanes(a, b, out, n, m, lanes):
     """``out[:, :, e] = a[:, :, e] @ b[:, :, e]`` for every lane ``e``; ``a`` (n, 5, L),
     ``b`` (5, m, L). The inner dimension is written out, so that each output stays in a
@@ -908,7 +908,7 @@ def _mm_lanes(a, b, out, n, m, lanes):
                                 + a[i, 4, e] * b[4, j, e])
 
 
-@njit(**_JIT)
+@njit(**_INNER)
 def _mm_tn_lanes(a, b, out, n, m, lanes):
     """``out[:, :, e] = a[:, :, e].T @ b[:, :, e]`` for every lane; ``a`` (5, n, L), ``b``
     (5, m, L)."""

@@ -23,7 +23,7 @@ from companion.control import slot
 from companion.fastlqr import slot_reference_nb, wrap_pi_nb
 from companion.params import Params
 
-_NB = {"cache": True, "nogil": True, "error_model": "numpy"}
+_NB = {"cache": True, "nogil": True, "error_model": "numpy", "no_cfunc_wrapper": True}
 
 _to_frame = njit(**_NB)(slot.to_frame)
 _from_frame = njit(**_NB)(slot.from_frame)

@@ -26,10 +26,12 @@ from companion.fastlqr import (GAIN_STABLE, LANES_DONE, LANES_MAX_STEPS, LANES_P
                                model_euler_nb, model_zoh_nb, newton_lanes, relative_state_nb,
                                slot_reference_nb, stabilising_gain, stable_lanes, wrap_pi_nb)
 
-_NB = {"cache": True, "nogil": True, "error_model": "numpy"}
+_NB = {"cache": True, "nogil": True, "error_model": "numpy", "no_cfunc_wrapper": True}
+#: Functions only called from compiled code: no Python wrapper to compile.
+_INNER = {**_NB, "no_cpython_wrapper": True}
 
 
-@njit(**_NB)
+@njit(**_INNER)
 def _to_lane(a2, b2, a, b, j):
     """Copy the model ``a2`` (5, 5), ``b2`` (5, 2) into lane ``j`` of a block's ``a``
     (5, 5, L) and ``b`` (5, 2, L)."""
@@ -93,7 +95,7 @@ def _zoh_models(idx, config, lin, a, b):
         _to_lane(a2, b2, a[lane // block], b[lane // block], lane % block)
 
 
-@njit(**_NB)
+@njit(**_INNER)
 def _warm_start(p, past, history, lane, j):
     """Replace ``p[:, :, j]`` = P(t-1) by the prediction of P(t) and shift it into
     ``past[:, :, :, j]`` (P(t-2), P(t-3), P(t-4)), for a lane with ``history`` solved periods

@@ -77,7 +77,7 @@ def _wrap_metric(a):
     return (a + math.pi) % _TWO_PI - math.pi
 
 
-_NB = {"cache": True, "nogil": True, "error_model": "numpy"}
+_NB = {"cache": True, "nogil": True, "error_model": "numpy", "no_cfunc_wrapper": True}
 
 
 @njit(**_NB)
