@@ -55,6 +55,7 @@ _SHORTCUT_RADIUS = 0.5 ** (1.0 / 4096.0)
 _JIT = {"cache": True, "error_model": "numpy", "no_cfunc_wrapper": True}
 #: Functions only called from compiled code: no Python wrapper to compile.
 _INNER = {**_JIT, "no_cpython_wrapper": True}
+_INLINE = {**_JIT, "inline": "always"}
 
 #: Sizes of the augmented companion model: 5 states, 2 inputs.
 NX, NU = 5, 2
@@ -920,7 +921,7 @@ def _mm_tn_lanes(a, b, out, n, m, lanes):
                                 + a[4, i, e] * b[4, j, e])
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _gain_lanes(a, b, r_diag, p, k, lanes):
     """``K = (R + B'PB)^-1 B'PA`` per lane (the 2x2 solve in closed form)."""
     n, m = b.shape[0], b.shape[1]   # runtime sizes: loops over lanes are the hot ones
@@ -940,7 +941,7 @@ def _gain_lanes(a, b, r_diag, p, k, lanes):
             k[1, j, e] = (s00 * x1 - s01 * x0) / det
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def newton_lanes(a, b, q_diag, r_diag, p, active, lanes, corr):
     """One Newton (Hewer) step on the Riccati equations of ``lanes`` lanes, in place.
 
@@ -1037,7 +1038,7 @@ def newton_lanes(a, b, q_diag, r_diag, p, active, lanes, corr):
                     p[j, i, e] = x
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def stable_lanes(a, b, k, lanes, status):
     """:func:`_radius_status` of each lane's closed loop ``A - B K`` with the bound
     ``1 - RADIUS_MARGIN``, the squarings done for all lanes at once. ``a`` (5, 5, L), ``b``
