@@ -22,3 +22,35 @@ def test_any_source_change_gives_a_new_digest(tmp_path):
     kernel = copy / "fastlqr.py"
     kernel.write_text(kernel.read_text() + "\n# changed\n")
     assert _jitcache.source_digest(copy) != before
+
+
+def test_lane_kernels_compile_and_are_marked(monkeypatch, tmp_path):
+    """compile_kernels runs the lane kernels and marks them; a marked set starts no helper."""
+    from companion.control import lqr_lanes
+
+    monkeypatch.setattr(_jitcache, "cache_dir", lambda: tmp_path)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    assert _jitcache.active() and not _jitcache.is_compiled(lqr_lanes.KERNELS)
+    lqr_lanes.compile_kernels()
+    assert lqr_lanes._solve.signatures and lqr_lanes._check.signatures
+    assert _jitcache.is_compiled(lqr_lanes.KERNELS)
+    assert _jitcache.compile_in_helper(lqr_lanes.KERNELS, "companion.control.lqr_lanes",
+                                       "compile_kernels") is None
+    _jitcache.wait_helper(None)
+
+
+def test_a_helper_process_marks_its_kernels(monkeypatch, tmp_path):
+    """The helper runs in a fresh interpreter that caches in the same directory."""
+    cache = tmp_path / _jitcache.source_digest()
+    cache.mkdir()
+    monkeypatch.setattr(_jitcache, "cache_dir", lambda: cache)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
+    helper = _jitcache.compile_in_helper("probe", "companion._jitcache", "_probe")
+    assert helper is not None
+    _jitcache.wait_helper(helper)
+    assert helper.returncode == 0 and _jitcache.is_compiled("probe")
+
+
+def test_no_helper_where_this_process_does_not_cache_there(monkeypatch, tmp_path):
+    monkeypatch.setattr(_jitcache, "cache_dir", lambda: tmp_path / "elsewhere")
+    assert _jitcache.compile_in_helper("probe", "companion._jitcache", "_probe") is None

@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import hashlib
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent
@@ -56,3 +58,61 @@ def install() -> None:
     import numba.core.config
 
     numba.core.config.CACHE_DIR = str(path)
+
+
+# -- compiling in a helper process -----------------------------------------------------------
+# numba compiles in one thread. On a first call with an empty cache, a second process can
+# compile one set of kernels into the shared cache while this one compiles another; this
+# process then loads the helper's kernels from the cache instead of compiling them.
+
+
+def active() -> bool:
+    """Whether this process caches in :func:`cache_dir` (:func:`install` succeeded)."""
+    return os.environ.get("NUMBA_CACHE_DIR") == str(cache_dir())
+
+
+def _marker(name: str) -> Path:
+    return cache_dir() / f"{name}.compiled"
+
+
+def is_compiled(name: str) -> bool:
+    """Whether the kernels called ``name`` are in the cache (see :func:`mark_compiled`)."""
+    return _marker(name).exists()
+
+
+def mark_compiled(name: str) -> None:
+    """Record that the kernels called ``name`` are in the cache."""
+    try:
+        _marker(name).write_bytes(b"")
+    except OSError:
+        pass
+
+
+def compile_in_helper(name: str, module: str, function: str) -> subprocess.Popen | None:
+    """Start ``module.function()`` in a helper Python process, which compiles the kernels
+    called ``name`` into the cache while this process goes on; :func:`wait_helper` before the
+    first call of any of them, so that this process loads them instead of compiling them too.
+
+    Returns None (nothing to wait for) where that would not help: this process does not cache
+    in :func:`cache_dir`, the kernels are already cached, or the process cannot start.
+    """
+    if not active() or is_compiled(name):
+        return None
+    try:
+        return subprocess.Popen([sys.executable, "-c", f"import {module}; {module}.{function}()"],
+                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
+    except OSError:
+        return None
+
+
+def wait_helper(helper: subprocess.Popen | None) -> None:
+    """Wait for a process of :func:`compile_in_helper` (if it failed, the kernels are simply
+    compiled here at their first call)."""
+    if helper is not None:
+        helper.wait()
+
+
+def _probe() -> None:
+    """A helper's job that compiles nothing: marks ``probe`` (tests/test_jitcache.py)."""
+    mark_compiled("probe")

@@ -9,12 +9,16 @@ The same computation as :meth:`companion.control.lqr.LqrController.gain`, i.e.
 5. stabilising solution ``P`` of the discrete algebraic Riccati equation and
    ``K = (R + B'PB)^-1 B'PA`` (:func:`companion.lqr.dlqr`),
 
-in ~10 microseconds instead of ~0.7 ms, for small dense matrices and without any Python
-object in the hot path. The Riccati equation is solved with the structure-preserving
+in ~10 microseconds instead of ~1 ms, for small dense matrices and without any Python
+object in the hot path: :func:`model_euler_nb` / :func:`model_zoh_nb` (steps 1-4) and
+:func:`dare_gain_nb` (step 5). The Riccati equation is solved with the structure-preserving
 doubling algorithm (SDA) polished by a Newton step; the zero-order hold uses the
 scaling-and-squaring Padé(13) matrix exponential. The compiled functions never raise on bad
-numbers: they report failure with a flag, and :func:`lqr_gain` turns it into
-``numpy.linalg.LinAlgError`` like ``dlqr``.
+numbers: they report failure with a status, :func:`stabilising_gain` settles the closed loops
+the compiled stability test cannot decide with numpy's eigenvalues, and :func:`lqr_gain`
+turns failure into ``numpy.linalg.LinAlgError`` like ``dlqr``. The controller step is
+:func:`lqr_prepare_nb`, :func:`stabilising_gain` and :func:`lqr_output_nb`; the batch
+simulation's lane kernels are at the end of the module.
 
 All compiled functions use ``error_model="numpy"``: a division by zero gives inf/nan (then
 caught by the finiteness checks) instead of raising.
@@ -48,13 +52,15 @@ _PADE13 = (64764752532480000.0, 32382376266240000.0, 7771770303897600.0,
            1187353796428800.0, 129060195264000.0, 10559470521600.0, 670442572800.0,
            33522128640.0, 1323241920.0, 40840800.0, 960960.0, 16380.0, 182.0, 1.0)
 _THETA13 = 5.371920351148152
-# rho(M) <= ||M^4096||^(1/4096) < 0.5^(1/4096) = 1 - 1.69e-4: the shortcut of
-# spectral_radius_below only proves bounds above this.
+# rho(M) <= ||M^4096||^(1/4096) < 0.5^(1/4096) = 1 - 1.69e-4: the squaring test of
+# _radius_status only proves bounds above this.
 _SHORTCUT_RADIUS = 0.5 ** (1.0 / 4096.0)
 
 _JIT = {"cache": True, "error_model": "numpy", "no_cfunc_wrapper": True}
 #: Functions only called from compiled code: no Python wrapper to compile.
 _INNER = {**_JIT, "no_cpython_wrapper": True}
+#: Lane kernels inlined into their callers at numba IR level: compiled once as part of the
+#: caller instead of compiled on their own and then linked and optimised again.
 _INLINE = {**_JIT, "inline": "always"}
 
 #: Sizes of the augmented companion model: 5 states, 2 inputs.
@@ -65,9 +71,15 @@ GAIN_FAILED, GAIN_STABLE, GAIN_UNDECIDED = 0, 1, 2
 _WORKSPACE = 9
 
 # The kernels below take their dimensions as arguments. Called from compiled code with literal
-# sizes (the 5x5 / 5x2 LQR problem in lqr_gain_nb), numba compiles a specialisation for those
-# literal values, LLVM sees constant trip counts and unrolls the loops: ~3x faster than the
-# runtime-sized version, which generic callers (solve_dare_nb, expm_nb) use.
+# sizes (NX = 5 in dare_gain_nb), numba compiles a specialisation for those literal values,
+# LLVM sees constant trip counts and unrolls the loops: ~3x faster than the runtime-sized
+# version, which generic callers (expm_nb, spectral_radius_below) use.
+#
+# Compile time (first call with an empty cache; docs/performance.md): each distinct
+# specialisation and each compiled function costs ~0.2-1 s, and a function is compiled with
+# all the code it calls linked in and optimised again. Hence one 5x5 product specialisation
+# (transposes are explicit), a flat call tree under dare_gain_nb, helpers without Python or
+# cfunc wrappers, and the zero-order hold and the eigenvalues kept out of the default path.
 #
 # Compile time: whole-array assignments (``x[:, :] = y``, ``x[:] = 0.0``), ``np.full`` and
 # array operators pull in numba's generic broadcasting code, several seconds of compilation
@@ -776,14 +788,14 @@ def slot_reference_nb(v_h, omega_h, rho_d, alpha_d, d):
     return wrap_pi_nb(-theta_rev), -along, omega_h
 
 
-#: Layout of the ``config`` array of :func:`lqr_step_nb` and of a ``config`` row of
+#: Layout of the ``config`` array of :func:`lqr_prepare_nb` and of a ``config`` row of
 #: :mod:`companion.control.lqr_lanes` (see :func:`lqr_step_config`).
 CONFIG_FIELDS = ("d", "dt", "zoh", "rho_min", "rho_d", "alpha_d", "geometric",
                  "measured", "clip_rho", "clip_alpha", "clip_beta", "v_max", "omega_max")
 
 
 def lqr_step_config(params) -> np.ndarray:
-    """The parameters :func:`lqr_step_nb` and an LQR lane need, as a float array in
+    """The parameters of the compiled step and of an LQR lane, as a float array in
     :data:`CONFIG_FIELDS` order (flags as 0.0 / 1.0)."""
     lqr, f, r = params.lqr, params.formation, params.robot
     return np.array([r.d, params.dt, lqr.discretization == "zoh", lqr.rho_min, f.distance,
@@ -877,11 +889,11 @@ def lqr_output_nb(found, k, gain, rest_gain, memory, xi, op, config):
 # instructions. The method is Newton's (Hewer's) iteration warm-started from each lane's
 # previous Riccati solution (the operating point moves little in one period), with the Stein
 # equations solved by Smith's doubling: matrix products only, no pivoting, no branches per
-# lane. Lanes without a warm start or where the iteration fails take the scalar cold path
-# (lqr_gain_p_nb).
+# lane. Lanes without a warm start, where the iteration fails or where the squaring test
+# cannot prove the closed loop stable take the scalar cold path (stabilising_gain).
 
 #: A lane's Newton iteration stops after a correction below this times its P: the error left
-#: is then of the order of its square (quadratic convergence), ~1e-12 and less.
+#: is then of the order of its square (quadratic convergence), ~1e-18 ...
 LANES_DONE = 1e-9
 LANES_MAX_STEPS = 5
 #: ... or when its next correction, predicted from the quadratic convergence with a safety

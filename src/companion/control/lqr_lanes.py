@@ -1,9 +1,10 @@
 """The LQR controller step for many lanes (episodes or robots) at once, compiled.
 
 Each lane is one :class:`companion.control.lqr.LqrController`: per sample period its relative
-state, feedforward and linearisation (:func:`_prepare`), its Riccati equation (:func:`_solve`:
-Newton's iteration warm-started from the lane's previous solutions, for all lanes of a block at
-once, vectorised by :func:`companion.fastlqr.newton_lanes`), a stability check
+state, feedforward and linearisation (:func:`_prepare`; zero-order-hold lanes then
+:func:`_zoh_models`), its Riccati equation (:func:`_solve`: Newton's iteration from an
+extrapolation of the lane's previous solutions (:func:`_warm_start`), for all lanes of a block
+at once, vectorised by :func:`companion.fastlqr.newton_lanes`), a stability check
 (:func:`_check`), the cold solver for lanes without a usable warm start (:func:`_cold`), and the
 output (:func:`_control`). :class:`LaneSet` holds the arrays; :func:`step_lanes` runs one
 period.
@@ -21,10 +22,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from companion import _jitcache
 from companion.fastlqr import (GAIN_STABLE, LANES_DONE, LANES_MAX_STEPS, LANES_PREDICTED,
                                LANES_QUAD_DECAY, LANES_QUAD_MIN, LANES_SAFETY, _gain_lanes,
-                               model_euler_nb, model_zoh_nb, newton_lanes, relative_state_nb,
-                               slot_reference_nb, stabilising_gain, stable_lanes, wrap_pi_nb)
+                               lqr_step_config, model_euler_nb, model_zoh_nb, newton_lanes,
+                               relative_state_nb, slot_reference_nb, stabilising_gain,
+                               stable_lanes, wrap_pi_nb)
+
+#: Name of the lane kernels in the compile cache (:func:`compile_kernels`).
+KERNELS = "lqr_lanes"
 
 _NB = {"cache": True, "nogil": True, "error_model": "numpy", "no_cfunc_wrapper": True}
 #: Functions only called from compiled code: no Python wrapper to compile.
@@ -331,3 +337,21 @@ def step_lanes(lanes: LaneSet, config: np.ndarray, q_diag: np.ndarray, r_diag: n
     _check(L.idx, L.a, L.b, L.k, L.corr, L.warm, L.history, L.gain, L.has_gain, L.need_cold)
     _cold(L, q_diag, r_diag, rest_gain)
     _control(L.idx, config, L.gain, L.mem, L.ref, L.err, L.xi, L.vw)
+
+
+def compile_kernels() -> None:
+    """Compile (or load from the cache) the kernels of :func:`step_lanes`, except the scalar
+    cold solver, by running them on one dummy lane; then mark them compiled
+    (:func:`companion._jitcache.mark_compiled`). :mod:`companion.sim.fast_batch` runs this in
+    a helper process on a first batch, while it compiles the scalar solver itself."""
+    from companion.params import Params
+
+    config = lqr_step_config(Params())[None, :]
+    lanes = LaneSet(np.zeros(1, np.int64), 1, np.ones((1, 5)), np.ones((1, 2)))
+    L = lanes
+    _prepare(L.idx, L.observed, L.pose, config, L.mem, L.ref, L.err, L.lin, L.a, L.b, L.warm,
+             L.active)
+    _solve(L.a, L.b, L.qd, L.rd, L.p, L.past, L.history, L.quad, L.k, L.active, L.corr)
+    _check(L.idx, L.a, L.b, L.k, L.corr, L.warm, L.history, L.gain, L.has_gain, L.need_cold)
+    _control(L.idx, config, L.gain, L.mem, L.ref, L.err, L.xi, L.vw)
+    _jitcache.mark_compiled(KERNELS)

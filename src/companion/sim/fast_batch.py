@@ -25,7 +25,8 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
-from companion.control import CONTROLLERS
+from companion import _jitcache
+from companion.control import CONTROLLERS, lqr_lanes
 from companion.control.lqr import LqrController
 from companion.errors import ConfigError
 from companion.control.baseline_lanes import KINDS, STATE_SIZE, BaselineLanes, baseline_config
@@ -206,6 +207,13 @@ def run_fast_batch(specs: Sequence, tol: Tolerance = Tolerance(), threads: int |
     threads = default_workers() if threads is None else threads
     if not isinstance(threads, int) or threads < 1:
         raise ConfigError(f"threads: expected a positive integer, got {threads!r}")
+    helper = None
+    if not lqr_lanes._solve.signatures and any(s.controller in LQR_FAMILY for s in specs):
+        # First LQR batch of this process: if the lane kernels are not in the cache yet, a
+        # helper process compiles them while this one compiles the scalar solver (the
+        # rest gains below need it) and the batch's own kernels.
+        helper = _jitcache.compile_in_helper(lqr_lanes.KERNELS, "companion.control.lqr_lanes",
+                                             "compile_kernels")
     out: list[dict | None] = [None] * len(specs)
     groups: dict[tuple[int, float], list[int]] = {}
     for i, spec in enumerate(specs):
@@ -219,14 +227,14 @@ def run_fast_batch(specs: Sequence, tol: Tolerance = Tolerance(), threads: int |
     for (steps, dt), members in groups.items():
         for c0 in range(0, len(members), CHUNK):
             chunk = members[c0:c0 + CHUNK]
-            rows = _run_chunk([specs[i] for i in chunk], steps, dt, tolerance, threads)
+            rows = _run_chunk([specs[i] for i in chunk], steps, dt, tolerance, threads, helper)
             for i, row in zip(chunk, rows):
                 out[i] = _metrics(row, steps, dt)
     return out  # type: ignore[return-value]
 
 
-def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads: int
-               ) -> np.ndarray:
+def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads: int,
+               helper=None) -> np.ndarray:
     n = len(specs)
     persons: dict[object, int] = {}
     tables = []
@@ -295,6 +303,7 @@ def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads:
                 control = partial(lanes.step, base_config)
             lanes.pose[:part.size] = start[part]
             tasks.append((lanes, control))
+    _jitcache.wait_helper(helper)
     if len(tasks) == 1:
         _drive(*tasks[0], steps, dt, shared)
     else:
