@@ -54,3 +54,13 @@ def test_a_helper_process_marks_its_kernels(monkeypatch, tmp_path):
 def test_no_helper_where_this_process_does_not_cache_there(monkeypatch, tmp_path):
     monkeypatch.setattr(_jitcache, "cache_dir", lambda: tmp_path / "elsewhere")
     assert _jitcache.compile_in_helper("probe", "companion._jitcache", "_probe") is None
+
+
+def test_step_kernels_compile_and_are_marked(monkeypatch, tmp_path):
+    from companion.control import lqr
+
+    monkeypatch.setattr(_jitcache, "cache_dir", lambda: tmp_path)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    lqr.compile_step_kernels()
+    assert _jitcache.is_compiled(lqr.STEP_KERNELS)
+    assert lqr.lqr_prepare_nb.signatures and lqr.lqr_output_nb.signatures

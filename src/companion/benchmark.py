@@ -3,7 +3,10 @@
 Everything is measured in one run on the figure-8 scenario (Table 2, 60 s, 1,200 steps):
 
 * ``step_us``: wall time of ``controller.step`` for each registered controller alone (no
-  avoidance layer, no supervisor), every step of one episode after a warm-up episode;
+  avoidance layer, no supervisor): median and 99th percentile over every step of
+  ``LATENCY_ROUNDS`` episodes, after a warm-up episode. The episodes of all controllers
+  (alone, stacked and the scipy reference) run round-robin, so that a passing load on the
+  machine does not fall on one controller's measurement only;
 * ``stack_step_us``: the same for the standard stack (:func:`companion.control.make_controller`:
   avoidance layer and safety supervisor around the controller);
 * ``scipy_step_us``: the LQR step with ``lqr.solver = "scipy"`` (scipy's
@@ -64,16 +67,27 @@ class Timed:
         self.inner.applied(cmd)
 
 
-def latency_us(make: Callable[[], Controller], sc: Scenario, params: Params,
-               duration: float) -> dict:
-    """Median and 99th percentile (us) of the step time over one episode, after a warm-up
-    episode."""
-    timed = Timed(make())
-    run_episode(timed, sc.person, params, duration)
-    timed.seconds.clear()
-    run_episode(timed, sc.person, params, duration)
-    us = np.asarray(timed.seconds) * 1e6
-    return {"median": float(np.median(us)), "p99": float(np.percentile(us, 99))}
+#: Timed episodes per controller in :func:`latencies_us`.
+LATENCY_ROUNDS = 3
+
+
+def latencies_us(makers: dict[str, tuple[Callable[[], Controller], Params]], sc: Scenario,
+                 duration: float, rounds: int = LATENCY_ROUNDS) -> dict[str, dict]:
+    """Median and 99th percentile (us) of the step time of each controller of ``makers``
+    (name -> (factory, params)) over every step of ``rounds`` episodes, after a warm-up
+    episode each; the rounds visit the controllers in turn."""
+    timed = {name: Timed(make()) for name, (make, _) in makers.items()}
+    for name, (_, params) in makers.items():
+        run_episode(timed[name], sc.person, params, duration)
+        timed[name].seconds.clear()
+    for _ in range(rounds):
+        for name, (_, params) in makers.items():
+            run_episode(timed[name], sc.person, params, duration)
+    out = {}
+    for name, t in timed.items():
+        us = np.asarray(t.seconds) * 1e6
+        out[name] = {"median": float(np.median(us)), "p99": float(np.percentile(us, 99))}
+    return out
 
 
 def batch_specs(sc: Scenario, n: int, duration: float, noisy: bool = False,
@@ -157,18 +171,19 @@ def run(episodes: int = 1000, duration: float = 60.0, workers: int | None = None
         result["compile_s"], result["warmup_s"] = first_call_seconds(_FIRST_STEP)
         progress("first batch in a fresh process (numba compile, then cached)")
         result["batch_compile_s"], result["batch_warmup_s"] = first_call_seconds(_FIRST_BATCH)
-    result["step_us"], result["stack_step_us"] = {}, {}
+    progress(f"step latency: every controller alone and stacked, and the lqr with scipy's "
+             f"solve_discrete_are, {LATENCY_ROUNDS} episodes each, round-robin")
+    makers: dict[str, tuple[Callable[[], Controller], Params]] = {}
     for name, entry in CONTROLLERS.items():
-        progress(f"step latency: {name}")
         params = entry.adjust(sc.params)
-        result["step_us"][name] = latency_us(lambda: entry.factory(params), sc, params,
-                                             duration)
-        result["stack_step_us"][name] = latency_us(lambda: make_controller(name, sc.params),
-                                                   sc, sc.params, duration)
-    progress("step latency: lqr with scipy's solve_discrete_are")
+        makers[name] = (lambda e=entry, p=params: e.factory(p), params)
+        makers["stack " + name] = (lambda n=name: make_controller(n, sc.params), sc.params)
     scipy_params = sc.params.replace(lqr=dataclasses.replace(sc.params.lqr, solver="scipy"))
-    result["scipy_step_us"] = latency_us(lambda: CONTROLLERS["lqr"].factory(scipy_params), sc,
-                                         scipy_params, duration)
+    makers["scipy"] = (lambda: CONTROLLERS["lqr"].factory(scipy_params), scipy_params)
+    latency = latencies_us(makers, sc, duration)
+    result["step_us"] = {name: latency[name] for name in CONTROLLERS}
+    result["stack_step_us"] = {name: latency["stack " + name] for name in CONTROLLERS}
+    result["scipy_step_us"] = latency["scipy"]
     result["speedup_vs_scipy"] = (result["scipy_step_us"]["median"]
                                   / result["step_us"]["lqr"]["median"])
     workers = workers or default_workers()

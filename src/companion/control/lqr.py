@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from companion import _jitcache
 from companion.control.base import Command, Observation, saturate
 from companion.fastlqr import (OP_FIELDS, lqr_gain, lqr_output_nb, lqr_prepare_nb,
                                lqr_step_config, model_zoh_nb, stabilising_gain)
@@ -34,6 +35,17 @@ from companion.params import Params
 
 
 REST_SPEED = 0.5  # m/s, person speed assumed by the fallback gain
+#: Name of the step's kernels in the compile cache (:func:`compile_step_kernels`).
+STEP_KERNELS = "lqr_step"
+
+
+def rest_operating_point(params: Params) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(chi, u, w)`` of the fallback gain: the desired slot for a person walking straight
+    at ``REST_SPEED``."""
+    f = params.formation
+    ref = slot_reference(REST_SPEED, 0.0, f.distance, f.bearing, params.robot.d)
+    return (np.array([f.distance, f.bearing, ref.beta]), np.array([ref.v, ref.omega]),
+            np.array([REST_SPEED, 0.0]))
 
 
 @dataclass(frozen=True)
@@ -66,14 +78,16 @@ class LqrController:
         self._compiled = lqr.solver == "compiled"
         self._zoh = lqr.discretization == "zoh"
         self._config = lqr_step_config(params)
-        f = params.formation
+        helper = None
+        if self._compiled and not lqr_prepare_nb.signatures:
+            # First compiled LQR of this process: if the step's kernels are not in the cache
+            # yet, a helper process compiles them while this one compiles the gain below.
+            helper = _jitcache.compile_in_helper(STEP_KERNELS, "companion.control.lqr",
+                                                 "compile_step_kernels")
         # Fallback gain for operating points without a stabilising Riccati solution (robot and
-        # person at rest: the heading mode is then uncontrollable in the linearisation). It is
-        # the gain at the desired slot for a person walking straight at REST_SPEED.
-        ref = slot_reference(REST_SPEED, 0.0, f.distance, f.bearing, params.robot.d)
-        self._rest_gain = self.gain(np.array([f.distance, f.bearing, ref.beta]),
-                                    np.array([ref.v, ref.omega]), np.array([REST_SPEED, 0.0]),
-                                    check=True)
+        # person at rest: the heading mode is then uncontrollable in the linearisation).
+        self._rest_gain = self.gain(*rest_operating_point(params), check=True)
+        _jitcache.wait_helper(helper)
         self._memory = np.zeros(3)    # [v_e(k-1), omega_e(k-1), 1 once a gain is known]
         self._gain = np.zeros((2, 5))
         self._xi = np.zeros(5)
@@ -183,3 +197,16 @@ class LqrController:
         if self._ref is not None:
             self._memory[0] = cmd.v - self._ref[0]
             self._memory[1] = cmd.omega - cmd.u_ob - self._ref[1]
+
+
+def compile_step_kernels() -> None:
+    """Compile (or load from the cache) ``lqr_prepare_nb`` and ``lqr_output_nb`` by running
+    them on dummy buffers, then mark them compiled. :class:`LqrController` runs this in a
+    helper process when it is first built with an empty cache, while it compiles the gain."""
+    config = lqr_step_config(Params())
+    memory, op, xi = np.zeros(3), np.zeros(len(OP_FIELDS)), np.zeros(5)
+    k, gain = np.zeros((2, 5)), np.zeros((2, 5))
+    lqr_prepare_nb(0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, config, memory, op, xi,
+                   np.zeros((5, 5)), np.zeros((5, 2)))
+    lqr_output_nb(True, k, gain, k, memory, xi, op, config)
+    _jitcache.mark_compiled(STEP_KERNELS)

@@ -27,11 +27,11 @@ from numba import njit
 
 from companion import _jitcache
 from companion.control import CONTROLLERS, lqr_lanes
-from companion.control.lqr import LqrController
+from companion.control.lqr import rest_operating_point
 from companion.errors import ConfigError
 from companion.control.baseline_lanes import KINDS, STATE_SIZE, BaselineLanes, baseline_config
 from companion.control.lqr_lanes import LaneSet, step_lanes
-from companion.fastlqr import lqr_step_config, relative_state_nb, slot_reference_nb
+from companion.fastlqr import lqr_gain, lqr_step_config, relative_state_nb, slot_reference_nb
 from companion.kinematics import unicycle_step
 from companion.metrics import Tolerance
 from companion.model import robot_pose_at, slot_reference
@@ -272,7 +272,7 @@ def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads:
             q_diag[e] = params.lqr.q
             r_diag[e] = params.lqr.r
             if params not in rest_cache:
-                rest_cache[params] = LqrController(params).rest_gain
+                rest_cache[params] = lqr_gain(*rest_operating_point(params), params)
             rest_gain[e] = rest_cache[params]
         else:
             base_config[e] = baseline_config(spec.controller, params)
