@@ -968,7 +968,7 @@ def _gain_lanes(a, b, r_diag, p, k, lanes):
 
 
 @njit(**_INLINE)
-def newton_lanes(a, b, q_diag, r_diag, p, active, lanes, corr):
+def newton_lanes(a, b, q_diag, r_diag, p, active, lanes, corr, proved):
     """One Newton (Hewer) step on the Riccati equations of ``lanes`` lanes, in place.
 
     Parameters
@@ -985,6 +985,12 @@ def newton_lanes(a, b, q_diag, r_diag, p, active, lanes, corr):
     corr : ndarray, shape (L,)
         Receives ``max|correction| / max|P|`` per lane, or ``inf`` where the Stein equation
         did not converge (closed loop not stable) or a number is not finite.
+    proved : ndarray of bool, shape (L,)
+        For the active lanes: whether the squarings ``M = Ac^(2^s)`` of the Smith doubling
+        proved the closed loop ``Ac = A - B K(P)`` of this step stable, as the squaring test
+        of :func:`_radius_status` would (a norm below 0.5 at s <= 12 before any above 1e3;
+        only squarings made while the lane was still iterating count, so that the answer does
+        not depend on the other lanes).
     """
     n = a.shape[0]
     k = np.empty((2, n, lanes))
@@ -1015,7 +1021,15 @@ def newton_lanes(a, b, q_diag, r_diag, p, active, lanes, corr):
         done[e] = not active[e]   # inactive lanes take no part (a stale P must not stall the block)
     step = np.empty(lanes)
     size = np.empty(lanes)
-    for _ in range(DARE_MAX_ITER):
+    squarings_ok = np.empty(lanes, np.bool_)  # no squaring norm above 1e3 so far
+    nrm = np.empty(lanes)
+    row = np.empty(lanes)
+    for e in range(lanes):
+        squarings_ok[e] = True
+        if active[e]:
+            proved[e] = False
+    shortcut = 1.0 - RADIUS_MARGIN > _SHORTCUT_RADIUS
+    for it in range(DARE_MAX_ITER):
         _mm_lanes(d, m_pow, tmp, n, n, lanes)
         _mm_tn_lanes(m_pow, tmp, t, n, n, lanes)
         for e in range(lanes):
@@ -1041,6 +1055,23 @@ def newton_lanes(a, b, q_diag, r_diag, p, active, lanes, corr):
             break
         _mm_lanes(m_pow, m_pow, m_sq, n, n, lanes)
         m_pow, m_sq = m_sq, m_pow
+        if shortcut and it < 12:              # m_pow = Ac^(2^(it + 1))
+            for e in range(lanes):
+                nrm[e] = 0.0
+            for i in range(n):
+                for e in range(lanes):
+                    row[e] = 0.0
+                for j in range(n):
+                    for e in range(lanes):
+                        row[e] += abs(m_pow[i, j, e])
+                for e in range(lanes):
+                    nrm[e] = max(nrm[e], row[e])
+            for e in range(lanes):
+                if active[e] and not done[e] and squarings_ok[e]:
+                    if nrm[e] < 0.5:
+                        proved[e] = True
+                    elif not nrm[e] < 1e3:
+                        squarings_ok[e] = False
     for e in range(lanes):
         dmax = 0.0
         pmax = 0.0
@@ -1062,55 +1093,3 @@ def newton_lanes(a, b, q_diag, r_diag, p, active, lanes, corr):
                     x = p[i, j, e] + 0.5 * (d[i, j, e] + d[j, i, e])
                     p[i, j, e] = x
                     p[j, i, e] = x
-
-
-@njit(**_INLINE)
-def stable_lanes(a, b, k, lanes, status):
-    """:func:`_radius_status` of each lane's closed loop ``A - B K`` with the bound
-    ``1 - RADIUS_MARGIN``, the squarings done for all lanes at once. ``a`` (5, 5, L), ``b``
-    (5, 2, L), ``k`` (2, 5, L); ``status`` (L,) receives :data:`GAIN_STABLE`,
-    :data:`GAIN_FAILED` or :data:`GAIN_UNDECIDED` (the eigenvalues must decide)."""
-    n = a.shape[0]
-    x = np.empty((n, n, lanes))
-    y = np.empty((n, n, lanes))
-    for i in range(n):
-        for j in range(n):
-            for e in range(lanes):
-                x[i, j, e] = a[i, j, e] - (b[i, 0, e] * k[0, j, e] + b[i, 1, e] * k[1, j, e])
-    pending = np.zeros(lanes, np.bool_)
-    nrm = np.empty(lanes)
-    row = np.empty(lanes)
-    for e in range(lanes):
-        finite = True
-        for i in range(n):
-            for j in range(n):
-                if not abs(x[i, j, e]) < np.inf:
-                    finite = False
-        status[e] = GAIN_UNDECIDED if finite else GAIN_FAILED
-        pending[e] = finite
-    if 1.0 - RADIUS_MARGIN > _SHORTCUT_RADIUS:
-        for _ in range(12):
-            _mm_lanes(x, x, y, n, n, lanes)
-            for e in range(lanes):
-                nrm[e] = 0.0
-            for i in range(n):
-                for e in range(lanes):
-                    row[e] = 0.0
-                for j in range(n):
-                    for e in range(lanes):
-                        row[e] += abs(y[i, j, e])
-                for e in range(lanes):
-                    nrm[e] = max(nrm[e], row[e])
-            left = False
-            for e in range(lanes):
-                if pending[e]:
-                    if nrm[e] < 0.5:
-                        status[e] = GAIN_STABLE
-                        pending[e] = False
-                    elif not nrm[e] < 1e3:
-                        pending[e] = False
-                    else:
-                        left = True
-            if not left:
-                break
-            x, y = y, x

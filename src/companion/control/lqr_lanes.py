@@ -23,11 +23,11 @@ import numpy as np
 from numba import njit
 
 from companion import _jitcache
-from companion.fastlqr import (GAIN_STABLE, LANES_DONE, LANES_MAX_STEPS, LANES_PREDICTED,
+from companion.fastlqr import (LANES_DONE, LANES_MAX_STEPS, LANES_PREDICTED,
                                LANES_QUAD_DECAY, LANES_QUAD_MIN, LANES_SAFETY, _gain_lanes,
                                lqr_step_config, model_euler_nb, model_zoh_nb, newton_lanes,
                                relative_state_nb, slot_reference_nb, stabilising_gain,
-                               stable_lanes, wrap_pi_nb)
+                               wrap_pi_nb)
 
 #: Name of the lane kernels in the compile cache (:func:`compile_kernels`).
 KERNELS = "lqr_lanes"
@@ -142,10 +142,11 @@ def _warm_start(p, past, history, lane, j):
 
 
 @njit(**_NB)
-def _solve(a, b, qd, rd, p, past, history, quad, k, active, corr):
+def _solve(a, b, qd, rd, p, past, history, quad, k, active, corr, proved):
     """Newton steps on the warm (``active``) lanes of every block, from the prediction of
-    :func:`_warm_start`. ``corr`` ends 0 where a lane converged and inf elsewhere; ``k`` gets
-    each lane's gain from its ``p``.
+    :func:`_warm_start`. ``corr`` ends 0 where a lane converged and inf elsewhere, ``proved``
+    True where the last step's squarings proved its closed loop stable; ``k`` gets each lane's
+    gain from its ``p``.
 
     A lane has converged after a step whose relative correction ``c`` is at most
     ``LANES_DONE``, or when the next correction, predicted by the quadratic convergence of
@@ -162,13 +163,15 @@ def _solve(a, b, qd, rd, p, past, history, quad, k, active, corr):
         act = active[blk * block:(blk + 1) * block]
         for j in range(block):
             converged[j] = False
+            proved[blk, j] = False
             last[j] = np.inf
             if act[j]:
                 lane = blk * block + j
                 _warm_start(p[blk], past[blk], history, lane, j)
                 quad[lane] *= LANES_QUAD_DECAY
         for _ in range(LANES_MAX_STEPS):
-            newton_lanes(a[blk], b[blk], qd[blk], rd[blk], p[blk], act, block, step_corr)
+            newton_lanes(a[blk], b[blk], qd[blk], rd[blk], p[blk], act, block, step_corr,
+                         proved[blk])
             left = False
             for j in range(block):
                 if not act[j]:
@@ -195,20 +198,19 @@ def _solve(a, b, qd, rd, p, past, history, quad, k, active, corr):
 
 
 @njit(**_NB)
-def _check(idx, a, b, k, corr, warm, history, gain, has_gain, need_cold):
-    """Accept each warm lane's gain if it converged and the squaring test proves it
-    stabilising; else flag a cold solve (which settles undecided closed loops by their
-    eigenvalues)."""
-    blocks, block = a.shape[0], a.shape[3]
-    status = np.empty(block, np.int64)
+def _check(idx, k, corr, proved, warm, history, gain, has_gain, need_cold):
+    """Accept each warm lane's gain if its Newton iteration converged and the squarings of
+    its last Smith doubling proved the closed loop stable (``proved``, see
+    :func:`companion.fastlqr.newton_lanes`); else flag a cold solve (which settles undecided
+    closed loops by their eigenvalues)."""
+    blocks, block = k.shape[0], k.shape[3]
     for blk in range(blocks):
-        stable_lanes(a[blk], b[blk], k[blk], block, status)
         for j in range(block):
             lane = blk * block + j
             need_cold[lane] = False
             if idx[lane] < 0:
                 continue
-            if warm[lane] and corr[blk, j] == 0.0 and status[j] == GAIN_STABLE:
+            if warm[lane] and corr[blk, j] == 0.0 and proved[blk, j]:
                 for r in range(2):
                     for c in range(5):
                         gain[lane, r, c] = k[blk, r, c, j]
@@ -279,6 +281,7 @@ class LaneSet:
             self.qd[blk, :, j] = q_diag[idx[lane]]
             self.rd[blk, :, j] = r_diag[idx[lane]]
         self.corr = np.zeros((blocks, block))
+        self.proved = np.zeros((blocks, block), np.bool_)   # closed loop proved stable
         self.history = np.zeros(n, np.int64)   # solved periods in a row (up to 4)
         self.warm = np.zeros(n, np.bool_)      # p holds the previous period's solution
         self.active = np.zeros(n, np.bool_)
@@ -333,8 +336,9 @@ def step_lanes(lanes: LaneSet, config: np.ndarray, q_diag: np.ndarray, r_diag: n
              L.active)
     if config[:, 2].any():
         _zoh_models(L.idx, config, L.lin, L.a, L.b)
-    _solve(L.a, L.b, L.qd, L.rd, L.p, L.past, L.history, L.quad, L.k, L.active, L.corr)
-    _check(L.idx, L.a, L.b, L.k, L.corr, L.warm, L.history, L.gain, L.has_gain, L.need_cold)
+    _solve(L.a, L.b, L.qd, L.rd, L.p, L.past, L.history, L.quad, L.k, L.active, L.corr,
+           L.proved)
+    _check(L.idx, L.k, L.corr, L.proved, L.warm, L.history, L.gain, L.has_gain, L.need_cold)
     _cold(L, q_diag, r_diag, rest_gain)
     _control(L.idx, config, L.gain, L.mem, L.ref, L.err, L.xi, L.vw)
 
@@ -351,7 +355,8 @@ def compile_kernels() -> None:
     L = lanes
     _prepare(L.idx, L.observed, L.pose, config, L.mem, L.ref, L.err, L.lin, L.a, L.b, L.warm,
              L.active)
-    _solve(L.a, L.b, L.qd, L.rd, L.p, L.past, L.history, L.quad, L.k, L.active, L.corr)
-    _check(L.idx, L.a, L.b, L.k, L.corr, L.warm, L.history, L.gain, L.has_gain, L.need_cold)
+    _solve(L.a, L.b, L.qd, L.rd, L.p, L.past, L.history, L.quad, L.k, L.active, L.corr,
+           L.proved)
+    _check(L.idx, L.k, L.corr, L.proved, L.warm, L.history, L.gain, L.has_gain, L.need_cold)
     _control(L.idx, config, L.gain, L.mem, L.ref, L.err, L.xi, L.vw)
     _jitcache.mark_compiled(KERNELS)
