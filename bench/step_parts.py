@@ -2,9 +2,9 @@
 
     python bench/step_parts.py [--calls N]
 
-Times ``LqrController.step`` (default parameters, one fixed observation) and each of its three
-compiled calls, ``lqr_prepare_nb``, ``dare_gain_nb`` and ``lqr_output_nb``, called from Python
-with the controller's own buffers as ``LqrController.step`` calls them, plus a trivial
+Times ``LqrController.step`` (default parameters, one fixed observation) and the compiled
+calls it makes, ``lqr_prepare_nb``, ``dare_gain_nb`` (through ``stabilising_gain``) and
+``lqr_output_nb``, called from Python with the controller's own buffers, plus a trivial
 compiled function (the dispatch cost). Prints the best and the median of 5 rounds of N calls,
 in microseconds per call (docs/performance.md).
 """

@@ -64,3 +64,14 @@ def test_step_kernels_compile_and_are_marked(monkeypatch, tmp_path):
     lqr.compile_step_kernels()
     assert _jitcache.is_compiled(lqr.STEP_KERNELS)
     assert lqr.lqr_prepare_nb.signatures and lqr.lqr_output_nb.signatures
+
+
+def test_a_helper_that_takes_too_long_is_stopped():
+    import subprocess
+    import sys
+
+    slow = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    _jitcache.wait_helper(slow, timeout=0.5)
+    assert slow.returncode is not None and slow.returncode != 0
+    _jitcache.stop_helper(slow)            # already ended: nothing to do
+    _jitcache.stop_helper(None)

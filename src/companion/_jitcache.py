@@ -106,10 +106,28 @@ def compile_in_helper(name: str, module: str, function: str) -> subprocess.Popen
         return None
 
 
-def wait_helper(helper: subprocess.Popen | None) -> None:
-    """Wait for a process of :func:`compile_in_helper` (if it failed, the kernels are simply
-    compiled here at their first call)."""
-    if helper is not None:
+#: Longest wait for a helper (s); a helper that takes longer is stopped (compiling all the
+#: package's kernels takes ~20 s on the project's machine).
+HELPER_TIMEOUT = 120.0
+
+
+def wait_helper(helper: subprocess.Popen | None, timeout: float = HELPER_TIMEOUT) -> None:
+    """Wait for a process of :func:`compile_in_helper`, at most ``timeout`` seconds (a helper
+    that failed or was stopped costs nothing but time: the kernels are then compiled here at
+    their first call)."""
+    if helper is None:
+        return
+    try:
+        helper.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        stop_helper(helper)
+
+
+def stop_helper(helper: subprocess.Popen | None) -> None:
+    """Stop a process of :func:`compile_in_helper` if it still runs (when the work that
+    needed its kernels was abandoned)."""
+    if helper is not None and helper.poll() is None:
+        helper.kill()
         helper.wait()
 
 

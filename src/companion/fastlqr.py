@@ -41,7 +41,7 @@ DARE_MAX_ITER = 100
 #: (the correction itself is normally ~1e-11 of P or less, so this is ample).
 NEWTON_TOL = 1e-3
 #: Newton steps stop when the correction is below this times P (after one step, normally),
-#: when it stops shrinking, or after NEWTON_MAX_STEPS (see _polish).
+#: when it stops shrinking, or after NEWTON_MAX_STEPS (see dare_gain_nb).
 NEWTON_DONE = 1e-12
 NEWTON_MAX_STEPS = 6
 #: A Newton step is skipped (correction 0) when the Riccati residual of P is at most this
@@ -531,6 +531,7 @@ def _newton(a, b, q_diag, r_diag, p, ws):
         _matmul(mt, tmp, t, NX, NX, NX)             # M' D M
         step = 0.0
         size = 0.0
+        total = 0.0                                 # not finite iff an entry of D is not
         for i in range(NX):
             for j in range(i, NX):
                 x = 0.5 * (t[i, j] + t[j, i])
@@ -538,7 +539,8 @@ def _newton(a, b, q_diag, r_diag, p, ws):
                 d[i, j] = d[j, i] = y
                 step = max(step, abs(x))
                 size = max(size, abs(y))
-        if not size < np.inf:
+                total += y
+        if not abs(total) < np.inf:
             return -1.0
         if step <= NEWTON_TOL * size:
             scale = 0.0
@@ -587,7 +589,7 @@ def _radius_status(m, bound, x, y, n):
                 nrm = max(nrm, row)
             if nrm < 0.5:
                 return GAIN_STABLE
-            if not nrm < 1e3:    # also nan
+            if not nrm < 1e3:    # (m is finite and |y| <= |x|^2 < 1e6: no overflow here)
                 break
     return GAIN_UNDECIDED
 
@@ -917,6 +919,10 @@ LANES_PREDICTED = 1e-12
 LANES_SAFETY = 4.0
 LANES_QUAD_DECAY = 0.9
 LANES_QUAD_MIN = 1e-7
+#: The ratio is never taken below this (the decay would otherwise take it towards 0 on a lane
+#: that converges in one step for a long time, and the prediction would then accept any
+#: correction); with LANES_SAFETY the predicted stop needs a correction below 5e-7 of P.
+LANES_QUAD_FLOOR = 1.0
 #: The Stein equation of a Newton step is solved to this relative accuracy, so that the
 #: truncation (this times the correction) stays below the Newton error.
 LANES_SMITH_TOL = 1e-7

@@ -216,3 +216,36 @@ def test_newton_lanes_proves_stability_as_the_scalar_test():
             assert not proved[e] and not corr[e] < np.inf
     stable = sum(s == fastlqr.GAIN_STABLE for s in scalar)
     assert 0.8 * stable <= proved.sum() < n
+
+
+def test_lane_gains_stay_exact_after_a_long_straight_and_a_sudden_turn():
+    """A lane that converged in one Newton step for many periods (straight walking) must not
+    accept an unconverged gain when the operating point jumps (the person starts turning):
+    every period's gain equals the cold gain of the lane's own model to 1e-9."""
+    from companion.control.lqr import rest_operating_point
+    from companion.control.lqr_lanes import LaneSet, step_lanes
+    from companion.model import robot_pose_at
+
+    params = Params()
+    config = fastlqr.lqr_step_config(params)[None, :]
+    q, r = np.array([params.lqr.q]), np.array([params.lqr.r])
+    rest = fastlqr.lqr_gain(*rest_operating_point(params), params)[None]
+    lanes = LaneSet(np.zeros(1, np.int64), 1, q, r)
+    f, d, dt = params.formation, params.robot.d, params.dt
+    hx, hy, hth, v = 0.0, 0.0, 0.0, 1.0
+    worst = 0.0
+    for period in range(360):
+        # turning first (the lane measures its quadratic-convergence ratio), then straight
+        # for 15 s (one Newton step a period), then a sudden turn
+        omega = 0.3 * math.sin(0.5 * period) if period < 30 else (0.0 if period < 330 else 0.6)
+        rx, ry, rth = robot_pose_at(f.distance, f.bearing, 0.05, hx, hy, hth, d)
+        lanes.observed[0] = (hx, hy, hth, v, omega)
+        lanes.pose[0] = (rx + (0.01 * math.sin(0.3 * period) if period < 30 else 0.0), ry, rth)
+        step_lanes(lanes, config, q, r, rest)
+        a = np.ascontiguousarray(lanes.a[0, :, :, 0])
+        b = np.ascontiguousarray(lanes.b[0, :, :, 0])
+        k, p = np.empty((2, 5)), np.empty((5, 5))
+        assert fastlqr.stabilising_gain(a, b, q[0], r[0], p, k)
+        worst = max(worst, float(np.max(np.abs(lanes.gain[0] - k)) / np.max(np.abs(k))))
+        hx, hy, hth = hx + v * dt * math.cos(hth), hy + v * dt * math.sin(hth), hth + omega * dt
+    assert worst <= 1e-9

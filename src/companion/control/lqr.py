@@ -61,9 +61,11 @@ class LqrStep:
 class LqrController:
     """Augmented-state LQR companion controller; see the module docstring.
 
-    With ``lqr.solver = "compiled"`` (default) a step is three compiled calls:
-    :func:`companion.fastlqr.lqr_prepare_nb` (relative state, feedforward, model),
-    :func:`companion.fastlqr.stabilising_gain` (Riccati equation and gain) and
+    With ``lqr.solver = "compiled"`` (default) a step is
+    :func:`companion.fastlqr.lqr_prepare_nb` (relative state, feedforward, forward-Euler model;
+    a zero-order-hold controller then calls :func:`companion.fastlqr.model_zoh_nb`),
+    :func:`companion.fastlqr.stabilising_gain` (:func:`companion.fastlqr.dare_gain_nb`, and
+    numpy's eigenvalues where its stability test cannot decide) and
     :func:`companion.fastlqr.lqr_output_nb`; with ``"scipy"`` the same step runs in Python with
     scipy's Riccati solver (the reference; tests/test_fastlqr.py checks they agree).
     """
@@ -86,7 +88,11 @@ class LqrController:
                                                  "compile_step_kernels")
         # Fallback gain for operating points without a stabilising Riccati solution (robot and
         # person at rest: the heading mode is then uncontrollable in the linearisation).
-        self._rest_gain = self.gain(*rest_operating_point(params), check=True)
+        try:
+            self._rest_gain = self.gain(*rest_operating_point(params), check=True)
+        except BaseException:
+            _jitcache.stop_helper(helper)
+            raise
         _jitcache.wait_helper(helper)
         self._memory = np.zeros(3)    # [v_e(k-1), omega_e(k-1), 1 once a gain is known]
         self._gain = np.zeros((2, 5))

@@ -207,13 +207,6 @@ def run_fast_batch(specs: Sequence, tol: Tolerance = Tolerance(), threads: int |
     threads = default_workers() if threads is None else threads
     if not isinstance(threads, int) or threads < 1:
         raise ConfigError(f"threads: expected a positive integer, got {threads!r}")
-    helper = None
-    if not lqr_lanes._solve.signatures and any(s.controller in LQR_FAMILY for s in specs):
-        # First LQR batch of this process: if the lane kernels are not in the cache yet, a
-        # helper process compiles them while this one compiles the scalar solver (the
-        # rest gains below need it) and the batch's own kernels.
-        helper = _jitcache.compile_in_helper(lqr_lanes.KERNELS, "companion.control.lqr_lanes",
-                                             "compile_kernels")
     out: list[dict | None] = [None] * len(specs)
     groups: dict[tuple[int, float], list[int]] = {}
     for i, spec in enumerate(specs):
@@ -224,12 +217,23 @@ def run_fast_batch(specs: Sequence, tol: Tolerance = Tolerance(), threads: int |
                               f"({dt:g} s), got {spec.duration:g} s")
         groups.setdefault((steps, dt), []).append(i)
     tolerance = np.array([tol.rho, tol.alpha, tol.beta])
-    for (steps, dt), members in groups.items():
-        for c0 in range(0, len(members), CHUNK):
-            chunk = members[c0:c0 + CHUNK]
-            rows = _run_chunk([specs[i] for i in chunk], steps, dt, tolerance, threads, helper)
-            for i, row in zip(chunk, rows):
-                out[i] = _metrics(row, steps, dt)
+    helper = None
+    if not lqr_lanes._solve.signatures and any(s.controller in LQR_FAMILY for s in specs):
+        # First LQR batch of this process: if the lane kernels are not in the cache yet, a
+        # helper process compiles them while this one compiles the scalar solver (the rest
+        # gains of _run_chunk need it).
+        helper = _jitcache.compile_in_helper(lqr_lanes.KERNELS, "companion.control.lqr_lanes",
+                                             "compile_kernels")
+    try:
+        for (steps, dt), members in groups.items():
+            for c0 in range(0, len(members), CHUNK):
+                chunk = members[c0:c0 + CHUNK]
+                rows = _run_chunk([specs[i] for i in chunk], steps, dt, tolerance, threads,
+                                  helper)
+                for i, row in zip(chunk, rows):
+                    out[i] = _metrics(row, steps, dt)
+    finally:
+        _jitcache.stop_helper(helper)
     return out  # type: ignore[return-value]
 
 
