@@ -919,10 +919,10 @@ LANES_PREDICTED = 1e-12
 LANES_SAFETY = 4.0
 LANES_QUAD_DECAY = 0.9
 LANES_QUAD_MIN = 1e-7
-#: The ratio is never taken below this (the decay would otherwise take it towards 0 on a lane
-#: that converges in one step for a long time, and the prediction would then accept any
-#: correction); with LANES_SAFETY the predicted stop needs a correction below 5e-7 of P.
-LANES_QUAD_FLOOR = 1.0
+#: ... and only for a correction below this: the ratio decays on a lane that converges in one
+#: step for a long time, and the cap bounds what is left after a stop whatever the estimate
+#: (the ratio times its square, ~2e-12 of P for the largest ratio measured).
+LANES_ACCEPT_MAX = 1e-6
 #: The Stein equation of a Newton step is solved to this relative accuracy, so that the
 #: truncation (this times the correction) stays below the Newton error.
 LANES_SMITH_TOL = 1e-7

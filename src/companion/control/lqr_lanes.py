@@ -23,8 +23,8 @@ import numpy as np
 from numba import njit
 
 from companion import _jitcache
-from companion.fastlqr import (LANES_DONE, LANES_MAX_STEPS, LANES_PREDICTED,
-                               LANES_QUAD_DECAY, LANES_QUAD_FLOOR, LANES_QUAD_MIN,
+from companion.fastlqr import (LANES_ACCEPT_MAX, LANES_DONE, LANES_MAX_STEPS,
+                               LANES_PREDICTED, LANES_QUAD_DECAY, LANES_QUAD_MIN,
                                LANES_SAFETY, _gain_lanes, lqr_step_config, model_euler_nb,
                                model_zoh_nb, newton_lanes, relative_state_nb,
                                slot_reference_nb, stabilising_gain, wrap_pi_nb)
@@ -153,10 +153,11 @@ def _solve(a, b, qd, rd, p, past, history, quad, k, active, corr, proved):
     Newton's method as ``quad c^2``, is below ``LANES_PREDICTED`` even with a safety factor
     ``LANES_SAFETY`` (the error left in P is of the order of that next correction).
     ``quad`` (per lane) is the largest recent ratio of a correction to the square of the one
-    before, decaying by ``LANES_QUAD_DECAY`` per period and used no lower than
-    ``LANES_QUAD_FLOOR``; it is only measured from corrections above ``LANES_QUAD_MIN``, where
-    rounding does not dominate the next one, and no prediction is made before the first
-    measurement."""
+    before, decaying by ``LANES_QUAD_DECAY`` per period; it is only measured from corrections
+    above ``LANES_QUAD_MIN``, where rounding does not dominate the next one. The predicted
+    stop applies only to corrections below ``LANES_ACCEPT_MAX`` (1e-6 of P), so that an
+    underestimated ratio (decayed, or not measured yet) leaves at most the true ratio times
+    1e-12."""
     blocks, block = a.shape[0], a.shape[3]
     converged = np.zeros(block, np.bool_)
     step_corr = np.empty(block)
@@ -185,10 +186,8 @@ def _solve(a, b, qd, rd, p, past, history, quad, k, active, corr, proved):
                     continue
                 if last[j] >= LANES_QUAD_MIN and last[j] < np.inf:
                     quad[lane] = max(quad[lane], c / (last[j] * last[j]))
-                predicted = np.inf            # quad unknown: no prediction
-                if quad[lane] > 0.0:
-                    predicted = LANES_SAFETY * max(quad[lane], LANES_QUAD_FLOOR) * c * c
-                if c <= LANES_DONE or predicted <= LANES_PREDICTED:
+                predicted = LANES_SAFETY * quad[lane] * c * c
+                if c <= LANES_DONE or (c <= LANES_ACCEPT_MAX and predicted <= LANES_PREDICTED):
                     act[j] = False
                     converged[j] = True
                 else:
