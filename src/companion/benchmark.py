@@ -13,7 +13,9 @@ Everything is measured in one run on the figure-8 scenario (Table 2, 60 s, 1,200
   ``solve_discrete_are``), and ``speedup_vs_scipy`` = its median over the compiled one;
 * ``batch_steps_per_s``: controller steps per second of the compiled batch
   (:mod:`companion.sim.fast_batch`) over N figure-8 episodes of the LQR (the scenario as
-  defined: exact person observations) from different starts;
+  defined: exact person observations) from different starts: the median of
+  ``BATCH_ROUNDS`` runs, made round-robin with the other batches (all runs in
+  ``batch.steps_per_s_runs``);
   ``batch_steps_per_s_by_controller``: the same for lqr, pid, vsm and ic;
   ``batch_noisy_steps_per_s``: the LQR with sensor noise and a different seed per episode; ``stack_batch_steps_per_s``: the standard
   stack in worker processes (:func:`companion.sim.batch.run_batch`, backend "processes") over
@@ -69,6 +71,8 @@ class Timed:
 
 #: Timed episodes per controller in :func:`latencies_us`.
 LATENCY_ROUNDS = 3
+#: Runs of each compiled batch in :func:`run` (round-robin; the median is reported).
+BATCH_ROUNDS = 3
 
 
 def latencies_us(makers: dict[str, tuple[Callable[[], Controller], Params]], sc: Scenario,
@@ -189,24 +193,31 @@ def run(episodes: int = 1000, duration: float = 60.0, workers: int | None = None
     workers = workers or default_workers()
     run_batch(batch_specs(sc, 2, 1.0, noisy=True) + batch_specs(sc, 2, 1.0, controller="pid"),
               workers)                                                # load the kernels
-    result["batch_steps_per_s_by_controller"] = {}
-    for name, noisy in (("lqr", False), ("lqr", True), ("pid", False), ("vsm", False),
-                        ("ic", False)):
-        progress(f"compiled batch: {episodes} episodes of {result['episode_steps']} steps, "
-                 f"{name}" + (", sensor noise" if noisy else ""))
-        specs = batch_specs(sc, episodes, duration, noisy=noisy, controller=name)
-        t = time.perf_counter()
-        metrics = run_batch(specs, workers, backend="compiled")
-        seconds = time.perf_counter() - t
-        rate = sum(m["steps"] for m in metrics) / seconds
-        if noisy:
-            result["batch_noisy_steps_per_s"] = rate
-            continue
-        result["batch_steps_per_s_by_controller"][name] = rate
-        if name == "lqr":
-            result["batch_steps_per_s"] = rate
-            result["batch"] = {"episodes": episodes, "workers": workers, "seconds": seconds,
-                               "all_finite": all(m["finite"] for m in metrics)}
+    configs = (("lqr", False), ("lqr", True), ("pid", False), ("vsm", False), ("ic", False))
+    rates: dict[tuple[str, bool], list[float]] = {c: [] for c in configs}
+    seconds: list[float] = []
+    finite = True
+    for round_ in range(BATCH_ROUNDS):
+        for name, noisy in configs:
+            progress(f"compiled batch, round {round_ + 1} of {BATCH_ROUNDS}: {episodes} "
+                     f"episodes of {result['episode_steps']} steps, {name}"
+                     + (", sensor noise" if noisy else ""))
+            specs = batch_specs(sc, episodes, duration, noisy=noisy, controller=name)
+            t = time.perf_counter()
+            metrics = run_batch(specs, workers, backend="compiled")
+            elapsed = time.perf_counter() - t
+            rates[(name, noisy)].append(sum(m["steps"] for m in metrics) / elapsed)
+            if (name, noisy) == ("lqr", False):
+                seconds.append(elapsed)
+                finite = finite and all(m["finite"] for m in metrics)
+    median = {c: float(np.median(r)) for c, r in rates.items()}
+    result["batch_steps_per_s"] = median[("lqr", False)]
+    result["batch_noisy_steps_per_s"] = median[("lqr", True)]
+    result["batch_steps_per_s_by_controller"] = {name: median[(name, False)]
+                                                 for name, noisy in configs if not noisy}
+    result["batch"] = {"episodes": episodes, "workers": workers,
+                       "seconds": float(np.median(seconds)), "all_finite": finite,
+                       "steps_per_s_runs": rates[("lqr", False)]}
     stack_episodes = max(1, episodes // 10)
     progress(f"standard stack in worker processes: {stack_episodes} episodes")
     specs = batch_specs(sc, stack_episodes, duration, noisy=True, stack=True)
@@ -233,8 +244,10 @@ def text(result: dict) -> str:
     lines.append(f"  {'lqr, scipy solve_discrete_are':28s} {sc['median']:9.1f} {sc['p99']:9.1f}")
     lines.append(f"  speed-up of the lqr step over scipy: {result['speedup_vs_scipy']:.0f}x")
     b = result["batch"]
-    lines.append(f"  compiled batch, {b['episodes']} episodes, {b['workers']} threads: "
-                 f"{result['batch_steps_per_s']:,.0f} lqr steps/s (exact observations), "
+    runs = b["steps_per_s_runs"]
+    lines.append(f"  compiled batch, {b['episodes']} episodes, {b['workers']} threads, median of "
+                 f"{len(runs)} runs: {result['batch_steps_per_s']:,.0f} lqr steps/s (exact "
+                 f"observations; runs {min(runs):,.0f}-{max(runs):,.0f}), "
                  f"{result['batch_noisy_steps_per_s']:,.0f} with sensor noise; "
                  + ", ".join(f"{name} {rate:,.0f}" for name, rate
                              in result["batch_steps_per_s_by_controller"].items()

@@ -915,14 +915,15 @@ LANES_MAX_STEPS = 5
 #: ... or when its next correction, predicted from the quadratic convergence with a safety
 #: factor, is below LANES_PREDICTED (see companion.control.lqr_lanes._solve). On the
 #: figure-8 the measured ratio of a correction to the square of the previous one was 0.2-2.2.
-LANES_PREDICTED = 1e-12
+LANES_PREDICTED = 1e-11
 LANES_SAFETY = 4.0
 LANES_QUAD_DECAY = 0.9
 LANES_QUAD_MIN = 1e-7
 #: ... and only for a correction below this: the ratio decays on a lane that converges in one
 #: step for a long time, and the cap bounds what is left after a stop whatever the estimate
-#: (the ratio times its square, ~2e-12 of P for the largest ratio measured).
-LANES_ACCEPT_MAX = 1e-6
+#: (the ratio times its square: ~9e-12 of P for the largest ratio measured). Measured on
+#: the figure-8: lane gains within 5e-12 of the cold gains (8e-15 median).
+LANES_ACCEPT_MAX = 2e-6
 #: The Stein equation of a Newton step is solved to this relative accuracy, so that the
 #: truncation (this times the correction) stays below the Newton error.
 LANES_SMITH_TOL = 1e-7

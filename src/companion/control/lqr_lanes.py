@@ -12,7 +12,7 @@ period.
 The batch simulator (:mod:`companion.sim.fast_batch`) runs sets of many lanes. A lane's result
 does not depend on the other lanes of its set (a set of one gives the same bits). The gain
 of a lane equals that of :meth:`companion.control.lqr.LqrController.gain` (cold doubling at
-every period) to about 1e-12 relative (``tests/sim/test_fast_batch.py``), so a lane follows
+every period) to about 1e-11 relative (``tests/sim/test_fast_batch.py``), so a lane follows
 the single-episode controller to that precision, except in closed loops that amplify such
 differences (docs/performance.md).
 """
@@ -155,9 +155,9 @@ def _solve(a, b, qd, rd, p, past, history, quad, k, active, corr, proved):
     ``quad`` (per lane) is the largest recent ratio of a correction to the square of the one
     before, decaying by ``LANES_QUAD_DECAY`` per period; it is only measured from corrections
     above ``LANES_QUAD_MIN``, where rounding does not dominate the next one. The predicted
-    stop applies only to corrections below ``LANES_ACCEPT_MAX`` (1e-6 of P), so that an
+    stop applies only to corrections below ``LANES_ACCEPT_MAX`` (2e-6 of P), so that an
     underestimated ratio (decayed, or not measured yet) leaves at most the true ratio times
-    1e-12."""
+    4e-12."""
     blocks, block = a.shape[0], a.shape[3]
     converged = np.zeros(block, np.bool_)
     step_corr = np.empty(block)
@@ -207,7 +207,7 @@ def _check(idx, k, corr, proved, warm, history, gain, has_gain, need_cold):
     :func:`companion.fastlqr.newton_lanes`); else flag a cold solve (which settles undecided
     closed loops by their eigenvalues). The proof concerns the gain the last Newton step
     started from, which differs from the accepted one by that step's correction (below 1e-9,
-    or predicted below 1e-12, of P), against a margin of at least 1.7e-4 in spectral radius
+    or below 2e-6 and predicted below 1e-11, of P), against a margin of at least 1.7e-4 in spectral radius
     that the proof gives."""
     blocks, block = k.shape[0], k.shape[3]
     for blk in range(blocks):
