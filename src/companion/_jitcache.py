@@ -16,6 +16,7 @@ process caches there too.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import subprocess
@@ -34,11 +35,18 @@ def source_digest(root: Path = PACKAGE) -> str:
     return h.hexdigest()[:12]
 
 
+@functools.lru_cache(maxsize=1)
+def _package_digest() -> str:
+    """:func:`source_digest` of the package, once per process (the code a process runs is
+    the code it imported)."""
+    return source_digest()
+
+
 def cache_dir() -> Path:
     """The cache directory for the current sources (see the module docstring). A
     ``NUMBA_CACHE_DIR`` that already ends in the digest (set by :func:`install` in a parent
     process) is used as it is."""
-    digest = source_digest()
+    digest = _package_digest()
     base = Path(os.environ.get("NUMBA_CACHE_DIR") or os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "companion", "numba"))
     return base if base.name == digest else base / digest

@@ -28,6 +28,7 @@ from companion.fastlqr import (LANES_ACCEPT_MAX, LANES_DONE, LANES_MAX_STEPS,
                                LANES_SAFETY, _gain_lanes, lqr_step_config, model_euler_nb,
                                model_zoh_nb, newton_lanes, relative_state_nb,
                                slot_reference_nb, stabilising_gain, wrap_pi_nb)
+from companion.params import Params
 
 #: Name of the lane kernels in the compile cache (:func:`compile_kernels`).
 KERNELS = "lqr_lanes"
@@ -332,12 +333,8 @@ def _cold(lanes: LaneSet, q_diag: np.ndarray, r_diag: np.ndarray,
                 lanes.has_gain[lane] = True
 
 
-def step_lanes(lanes: LaneSet, config: np.ndarray, q_diag: np.ndarray, r_diag: np.ndarray,
-               rest_gain: np.ndarray) -> None:
-    """One controller period of every lane: from ``lanes.observed`` and ``lanes.pose`` to
-    ``lanes.vw`` (see the module docstring). ``config`` rows are
-    :func:`companion.fastlqr.lqr_step_config`."""
-    L = lanes
+def _warm_solve(L: LaneSet, config: np.ndarray) -> None:
+    """The compiled part of a period up to the cold solver: model, warm Newton, check."""
     _prepare(L.idx, L.observed, L.pose, config, L.mem, L.ref, L.err, L.lin, L.a, L.b, L.warm,
              L.active)
     if config[:, 2].any():
@@ -345,24 +342,26 @@ def step_lanes(lanes: LaneSet, config: np.ndarray, q_diag: np.ndarray, r_diag: n
     _solve(L.a, L.b, L.qd, L.rd, L.p, L.past, L.history, L.quad, L.k, L.active, L.corr,
            L.proved)
     _check(L.idx, L.k, L.corr, L.proved, L.warm, L.history, L.gain, L.has_gain, L.need_cold)
+
+
+def step_lanes(lanes: LaneSet, config: np.ndarray, q_diag: np.ndarray, r_diag: np.ndarray,
+               rest_gain: np.ndarray) -> None:
+    """One controller period of every lane: from ``lanes.observed`` and ``lanes.pose`` to
+    ``lanes.vw`` (see the module docstring). ``config`` rows are
+    :func:`companion.fastlqr.lqr_step_config`."""
+    L = lanes
+    _warm_solve(L, config)
     _cold(L, q_diag, r_diag, rest_gain)
     _control(L.idx, config, L.gain, L.mem, L.ref, L.err, L.xi, L.vw)
 
 
 def compile_kernels() -> None:
     """Compile (or load from the cache) the kernels of :func:`step_lanes`, except the scalar
-    cold solver and the zero-order-hold models, by running them on one dummy lane; then mark them compiled
-    (:func:`companion._jitcache.mark_compiled`). :mod:`companion.sim.fast_batch` runs this in
+    cold solver and the zero-order-hold models, by running them on one dummy lane; then mark
+    them compiled (:func:`companion._jitcache.mark_compiled`). :mod:`companion.sim.fast_batch` runs this in
     a helper process on a first batch, while it compiles the scalar solver itself."""
-    from companion.params import Params
-
     config = lqr_step_config(Params())[None, :]
-    lanes = LaneSet(np.zeros(1, np.int64), 1, np.ones((1, 5)), np.ones((1, 2)))
-    L = lanes
-    _prepare(L.idx, L.observed, L.pose, config, L.mem, L.ref, L.err, L.lin, L.a, L.b, L.warm,
-             L.active)
-    _solve(L.a, L.b, L.qd, L.rd, L.p, L.past, L.history, L.quad, L.k, L.active, L.corr,
-           L.proved)
-    _check(L.idx, L.k, L.corr, L.proved, L.warm, L.history, L.gain, L.has_gain, L.need_cold)
+    L = LaneSet(np.zeros(1, np.int64), 1, np.ones((1, 5)), np.ones((1, 2)))
+    _warm_solve(L, config)
     _control(L.idx, config, L.gain, L.mem, L.ref, L.err, L.xi, L.vw)
     _jitcache.mark_compiled(KERNELS)
