@@ -453,6 +453,7 @@ def _sda(a, b, q_diag, r_diag, h, ws):
 def _gain(a, b, r_diag, p, k):
     """``k = (R + B'PB)^-1 B'PA`` (2, 5), the 2x2 system solved in closed form; False if
     ``R + B'PB`` is singular or a number is not finite."""
+    # Written out rather than _matmul: each other shape of _matmul is one more compilation.
     bt_p = np.empty((NU, NX))
     for i in range(NU):
         for j in range(NX):
