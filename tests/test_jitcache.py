@@ -24,18 +24,23 @@ def test_any_source_change_gives_a_new_digest(tmp_path):
     assert _jitcache.source_digest(copy) != before
 
 
-def test_lane_kernels_compile_and_are_marked(monkeypatch, tmp_path):
-    """compile_kernels runs the lane kernels and marks them; a marked set starts no helper."""
+def test_lane_kernels_compile_and_the_solver_is_marked(monkeypatch, tmp_path):
+    """compile_solver runs the lanes' solver and marks it (a marked solver starts no
+    helper); compile_kernels runs the other lane kernels."""
     from companion.control import lqr_lanes
 
     monkeypatch.setattr(_jitcache, "cache_dir", lambda: tmp_path)
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
-    assert _jitcache.active() and not _jitcache.is_compiled(lqr_lanes.KERNELS)
+    assert _jitcache.active() and not _jitcache.is_compiled(lqr_lanes.SOLVER)
+    lqr_lanes.compile_solver()
+    assert lqr_lanes._solve.signatures
+    assert _jitcache.is_compiled(lqr_lanes.SOLVER)
+    assert _jitcache.compile_in_helper(lqr_lanes.SOLVER, "companion.control.lqr_lanes",
+                                       "compile_solver") is None
     lqr_lanes.compile_kernels()
-    assert lqr_lanes._solve.signatures and lqr_lanes._check.signatures
-    assert _jitcache.is_compiled(lqr_lanes.KERNELS)
-    assert _jitcache.compile_in_helper(lqr_lanes.KERNELS, "companion.control.lqr_lanes",
-                                       "compile_kernels") is None
+    for kernel in (lqr_lanes._prepare, lqr_lanes._gains,
+                   lqr_lanes._check, lqr_lanes._control):
+        assert kernel.signatures, kernel
     _jitcache.wait_helper(None)
 
 

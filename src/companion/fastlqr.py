@@ -906,13 +906,19 @@ def lqr_output_nb(found, k, gain, rest_gain, memory, xi, op, config):
 # instructions. The method is Newton's (Hewer's) iteration warm-started from each lane's
 # previous Riccati solution (the operating point moves little in one period), with the Stein
 # equations solved by Smith's doubling: matrix products only, no pivoting, no branches per
-# lane. Lanes without a warm start, where the iteration fails or where the squaring test
-# cannot prove the closed loop stable take the scalar cold path (stabilising_gain).
+# lane. A lane without a previous solution starts from the solution at its rest operating
+# point (computed once per parameter set). Lanes where the iteration fails (its start does not
+# stabilise the model) or where the squaring test cannot prove the closed loop stable take the
+# scalar cold path (stabilising_gain).
 
 #: A lane's Newton iteration stops after a correction below this times its P: the error left
 #: is then of the order of its square (quadratic convergence), ~1e-18 ...
 LANES_DONE = 1e-9
+#: Newton steps per period for all lanes; lanes still iterating then go on alone, up to
+#: LANES_LONG_STEPS in all (Newton's iteration from a stabilising start always converges;
+#: from the rest solution or after a sudden change it needs more than a warm period's 1-3).
 LANES_MAX_STEPS = 5
+LANES_LONG_STEPS = 40
 #: ... or when its next correction, predicted from the quadratic convergence with a safety
 #: factor, is below LANES_PREDICTED (see companion.control.lqr_lanes._solve). On the
 #: figure-8 the measured ratio of a correction to the square of the previous one was 0.2-2.2.

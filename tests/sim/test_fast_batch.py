@@ -222,15 +222,13 @@ def test_lane_gains_stay_exact_after_a_long_straight_and_a_sudden_turn():
     """A lane that converged in one Newton step for many periods (straight walking) must not
     accept an unconverged gain when the operating point jumps (the person starts turning):
     every period's gain equals the cold gain of the lane's own model to 1e-9."""
-    from companion.control.lqr import rest_operating_point
-    from companion.control.lqr_lanes import LaneSet, step_lanes
+    from companion.control.lqr_lanes import LaneSet, lane_params, step_lanes
     from companion.model import robot_pose_at
 
     params = Params()
-    config = fastlqr.lqr_step_config(params)[None, :]
-    q, r = np.array([params.lqr.q]), np.array([params.lqr.r])
-    rest = fastlqr.lqr_gain(*rest_operating_point(params), params)[None]
-    lanes = LaneSet(np.zeros(1, np.int64), 1, q, r)
+    rows = lane_params([params])
+    q, r = rows.q_diag, rows.r_diag
+    lanes = LaneSet(np.zeros(1, np.int64), 1, rows)
     f, d, dt = params.formation, params.robot.d, params.dt
     hx, hy, hth, v = 0.0, 0.0, 0.0, 1.0
     worst = 0.0
@@ -241,7 +239,7 @@ def test_lane_gains_stay_exact_after_a_long_straight_and_a_sudden_turn():
         rx, ry, rth = robot_pose_at(f.distance, f.bearing, 0.05, hx, hy, hth, d)
         lanes.observed[0] = (hx, hy, hth, v, omega)
         lanes.pose[0] = (rx + (0.01 * math.sin(0.3 * period) if period < 30 else 0.0), ry, rth)
-        step_lanes(lanes, config, q, r, rest)
+        step_lanes(lanes, rows)
         a = np.ascontiguousarray(lanes.a[0, :, :, 0])
         b = np.ascontiguousarray(lanes.b[0, :, :, 0])
         k, p = np.empty((2, 5)), np.empty((5, 5))
@@ -249,3 +247,48 @@ def test_lane_gains_stay_exact_after_a_long_straight_and_a_sudden_turn():
         worst = max(worst, float(np.max(np.abs(lanes.gain[0] - k)) / np.max(np.abs(k))))
         hx, hy, hth = hx + v * dt * math.cos(hth), hy + v * dt * math.sin(hth), hth + omega * dt
     assert worst <= 1e-9
+
+
+def test_lanes_start_from_the_rest_solution_without_the_scalar_solver(monkeypatch):
+    """Lanes without a previous solution start Newton from their rest solution; lanes that
+    need more than the block's steps go on gathered (``_solve_on``). On the benchmark's
+    first batch (figure-8, noisy, starts off the slot) no lane needs the scalar cold solver,
+    and every lane's gain equals the cold gain of its model (so the first batch of a process
+    does not compile the scalar solver)."""
+    from companion.benchmark import batch_specs
+    from companion.control import lqr_lanes
+    from companion.sim.scenario import load_scenario
+
+    cold, gathered, worst = [], [], [0.0]
+    solve_on, control = lqr_lanes._solve_on, lqr_lanes._control
+    sets = []
+    init = lqr_lanes.LaneSet.__init__
+
+    def record_init(self, *args):
+        init(self, *args)
+        sets.append(self)
+
+    def record_solve_on(L, lanes, steps):
+        gathered.append(lanes.size)
+        solve_on(L, lanes, steps)
+
+    def check_control(idx, config, gain, *args):
+        L = sets[-1]
+        for lane in np.flatnonzero(idx >= 0):
+            blk, j = divmod(int(lane), L.block)
+            a = np.ascontiguousarray(L.a[blk, :, :, j])
+            b = np.ascontiguousarray(L.b[blk, :, :, j])
+            k, p = np.empty((2, 5)), np.empty((5, 5))
+            assert fastlqr.stabilising_gain(a, b, L.qd[blk, :, j].copy(),
+                                            L.rd[blk, :, j].copy(), p, k)
+            worst[0] = max(worst[0], float(np.max(np.abs(gain[lane] - k)) / np.max(np.abs(k))))
+        return control(idx, config, gain, *args)
+
+    monkeypatch.setattr(lqr_lanes.LaneSet, "__init__", record_init)
+    monkeypatch.setattr(lqr_lanes, "_solve_on", record_solve_on)
+    monkeypatch.setattr(lqr_lanes, "_control", check_control)
+    monkeypatch.setattr(lqr_lanes, "stabilising_gain",
+                        lambda *args: cold.append(1) or fastlqr.stabilising_gain(*args))
+    run_fast_batch(batch_specs(load_scenario("figure8"), 2, 1.0, noisy=True), threads=1)
+    assert cold == [] and len(gathered) >= 1
+    assert worst[0] <= 1e-9

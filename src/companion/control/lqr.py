@@ -48,6 +48,20 @@ def rest_operating_point(params: Params) -> tuple[np.ndarray, np.ndarray, np.nda
             np.array([REST_SPEED, 0.0]))
 
 
+def reference_solution(chi, u, w, params: Params, check: bool = False
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """``(K, P)`` of the augmented model linearised at ``(chi, u, w)`` (rho floored at
+    ``lqr.rho_min``) by the reference path: the model of :mod:`companion.model` and scipy's
+    ``solve_discrete_are`` (:func:`companion.lqr.dlqr`, which raises
+    ``numpy.linalg.LinAlgError`` where no stabilising gain exists)."""
+    lqr = params.lqr
+    lin = np.array([max(chi[0], lqr.rho_min), chi[1], chi[2]])
+    jx, ju = jacobians(lin, np.asarray(u, dtype=float), np.asarray(w, dtype=float),
+                       params.robot.d)
+    a_bar, b_bar = augment(*discretize(jx, ju, params.dt, lqr.discretization))
+    return dlqr(a_bar, b_bar, np.diag(lqr.q), np.diag(lqr.r), check=check)
+
+
 @dataclass(frozen=True)
 class LqrStep:
     """Diagnostics of one controller step (for logs, tests and plots)."""
@@ -73,8 +87,6 @@ class LqrController:
     def __init__(self, params: Params):
         self.params = params
         lqr = params.lqr
-        self._q = np.diag(lqr.q)
-        self._r = np.diag(lqr.r)
         self._q_diag = np.array(lqr.q, dtype=float)
         self._r_diag = np.array(lqr.r, dtype=float)
         self._compiled = lqr.solver == "compiled"
@@ -140,15 +152,9 @@ class LqrController:
 
         Raises ``numpy.linalg.LinAlgError`` where no stabilising gain exists.
         """
-        p = self.params
         if self._compiled:
-            return lqr_gain(chi, u, w, p)
-        lin = np.array([max(chi[0], p.lqr.rho_min), chi[1], chi[2]])
-        jx, ju = jacobians(lin, np.asarray(u, dtype=float), np.asarray(w, dtype=float),
-                           p.robot.d)
-        a, b = discretize(jx, ju, p.dt, p.lqr.discretization)
-        a_bar, b_bar = augment(a, b)
-        k, _ = dlqr(a_bar, b_bar, self._q, self._r, check=check)
+            return lqr_gain(chi, u, w, self.params)
+        k, _ = reference_solution(chi, u, w, self.params, check=check)
         return k
 
     def step(self, obs: Observation) -> Command:

@@ -27,11 +27,10 @@ from numba import njit
 
 from companion import _jitcache
 from companion.control import CONTROLLERS, lqr_lanes
-from companion.control.lqr import rest_operating_point
 from companion.errors import ConfigError
 from companion.control.baseline_lanes import KINDS, STATE_SIZE, BaselineLanes, baseline_config
 from companion.control.lqr_lanes import LaneSet, step_lanes
-from companion.fastlqr import lqr_gain, lqr_step_config, relative_state_nb, slot_reference_nb
+from companion.fastlqr import relative_state_nb, slot_reference_nb
 from companion.kinematics import unicycle_step
 from companion.metrics import Tolerance
 from companion.model import robot_pose_at, slot_reference
@@ -219,11 +218,10 @@ def run_fast_batch(specs: Sequence, tol: Tolerance = Tolerance(), threads: int |
     tolerance = np.array([tol.rho, tol.alpha, tol.beta])
     helper = None
     if not lqr_lanes._solve.signatures and any(s.controller in LQR_FAMILY for s in specs):
-        # First LQR batch of this process: if the lane kernels are not in the cache yet, a
-        # helper process compiles them while this one compiles the scalar solver (the rest
-        # gains of _run_chunk need it).
-        helper = _jitcache.compile_in_helper(lqr_lanes.KERNELS, "companion.control.lqr_lanes",
-                                             "compile_kernels")
+        # First LQR batch of this process: if the lanes' Riccati solver is not in the cache
+        # yet, a helper process compiles it while this one compiles the other kernels.
+        helper = _jitcache.compile_in_helper(lqr_lanes.SOLVER, "companion.control.lqr_lanes",
+                                             "compile_solver")
     try:
         for (steps, dt), members in groups.items():
             for c0 in range(0, len(members), CHUNK):
@@ -245,15 +243,11 @@ def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads:
     pidx = np.empty(n, np.int64)
     start = np.empty((n, 3))
     geo = np.empty((n, 3))
-    config = np.zeros((n, 13))
     base_config = np.zeros((n, 17))
     base_state = np.zeros((n, STATE_SIZE))
-    q_diag = np.ones((n, 5))
-    r_diag = np.ones((n, 2))
-    rest_gain = np.zeros((n, 2, 5))
+    lqr_rows: list[Params | None] = [None] * n
     noisy = np.zeros(n, np.bool_)
     noise = np.zeros((n, steps if any(s.noise != SensorNoise() for s in specs) else 1, 5))
-    rest_cache: dict[Params, np.ndarray] = {}
     for e, spec in enumerate(specs):
         params = CONTROLLERS[spec.controller].adjust(spec.params)
         f, d = params.formation, params.robot.d
@@ -272,12 +266,7 @@ def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads:
         else:
             start[e] = (spec.start.x, spec.start.y, spec.start.theta)
         if spec.controller in LQR_FAMILY:
-            config[e] = lqr_step_config(params)
-            q_diag[e] = params.lqr.q
-            r_diag[e] = params.lqr.r
-            if params not in rest_cache:
-                rest_cache[params] = lqr_gain(*rest_operating_point(params), params)
-            rest_gain[e] = rest_cache[params]
+            lqr_rows[e] = params
         else:
             base_config[e] = baseline_config(spec.controller, params)
             if spec.controller == "pid":
@@ -288,6 +277,7 @@ def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads:
             noise[e] = np.random.default_rng(spec.seed).normal(size=(steps, 5)) * np.array(
                 [sn.position, sn.position, sn.heading, sn.speed, sn.turn_rate])
     person = np.stack(tables)
+    lane_params = lqr_lanes.lane_params(lqr_rows)
     acc = np.zeros((n, _N_ACC))
     acc[:, _MIN_DIST] = np.inf
     acc[:, _LAST_OUT] = -1.0
@@ -299,14 +289,20 @@ def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads:
         for part in np.array_split(family, min(threads, family.size)) if family.size else []:
             idx = _padded(part)
             if is_lqr[part[0]]:
-                lanes = LaneSet(idx, BLOCK, q_diag, r_diag)
-                control = partial(step_lanes, lanes, config, q_diag, r_diag, rest_gain)
+                lanes = LaneSet(idx, BLOCK, lane_params)
+                control = partial(step_lanes, lanes, lane_params)
             else:
                 lanes = BaselineLanes(idx)
                 lanes.state[:part.size] = base_state[part]
                 control = partial(lanes.step, base_config)
             lanes.pose[:part.size] = start[part]
             tasks.append((lanes, control))
+    if helper is not None:
+        # Compile (or load) this process's kernels while the helper compiles the solver.
+        lqr_lanes.compile_kernels()
+        none = np.empty(0, np.int64)
+        _observe(0, none, person, pidx, noise, noisy, np.empty((0, 5)))
+        _account(0, dt, none, person, pidx, geo, np.empty((0, 2)), np.empty((0, 3)), tol, acc)
     _jitcache.wait_helper(helper)
     if len(tasks) == 1:
         _drive(*tasks[0], steps, dt, shared)
