@@ -19,6 +19,7 @@ differences (docs/performance.md).
 
 from __future__ import annotations
 
+import subprocess
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -37,6 +38,8 @@ from companion.params import Params
 
 #: Name of :func:`_solve` in the compile cache (:func:`compile_solver`).
 SOLVER = "lqr_lanes_solve"
+#: Name of the scalar cold solver in the compile cache (:func:`compile_cold_solver`).
+COLD = "lqr_lanes_cold"
 
 _NB = {"cache": True, "nogil": True, "error_model": "numpy", "no_cfunc_wrapper": True}
 #: Functions only called from compiled code: no Python wrapper to compile.
@@ -386,6 +389,9 @@ class LaneSet:
         self.vw = np.zeros((n, 2))             # output v, omega
         self.observed = np.zeros((n, 5))       # person x, y, theta, v, omega (input)
         self.pose = np.zeros((n, 3))           # robot x, y, theta (input)
+        #: A process compiling the scalar cold solver (:func:`compile_cold_solver`), waited
+        #: for before the first cold solve, so that this process loads it instead.
+        self.cold_helper: subprocess.Popen | None = None
 
 
 def _cold(lanes: LaneSet, params: LaneParams) -> None:
@@ -395,6 +401,8 @@ def _cold(lanes: LaneSet, params: LaneParams) -> None:
     solution."""
     if not lanes.need_cold.any():
         return
+    _jitcache.wait_helper(lanes.cold_helper)
+    lanes.cold_helper = None
     k_cold = np.empty((2, 5))
     p_cold = np.empty((5, 5))
     for lane in np.flatnonzero(lanes.need_cold):
@@ -485,6 +493,16 @@ def compile_solver() -> None:
     _solve(L.a, L.b, L.qd, L.rd, L.p, L.past, L.history, True, L.quad, L.active, 1, L.corr,
            L.proved)
     _jitcache.mark_compiled(SOLVER)
+
+
+def compile_cold_solver() -> None:
+    """Compile (or load from the cache) the scalar cold solver of :func:`_cold`
+    (:func:`companion.fastlqr.stabilising_gain`) on a dummy model, then mark it compiled.
+    :mod:`companion.sim.fast_batch` runs this in a helper process while a first batch
+    runs."""
+    a, b = 0.5 * np.eye(5), np.ones((5, 2))
+    stabilising_gain(a, b, np.ones(5), np.ones(2), np.empty((5, 5)), np.empty((2, 5)))
+    _jitcache.mark_compiled(COLD)
 
 
 def compile_kernels() -> None:

@@ -30,7 +30,7 @@ from companion.control import CONTROLLERS, lqr_lanes
 from companion.errors import ConfigError
 from companion.control.baseline_lanes import KINDS, STATE_SIZE, BaselineLanes, baseline_config
 from companion.control.lqr_lanes import LaneSet, step_lanes
-from companion.fastlqr import relative_state_nb, slot_reference_nb
+from companion.fastlqr import dare_gain_nb, relative_state_nb, slot_reference_nb
 from companion.kinematics import unicycle_step
 from companion.metrics import Tolerance
 from companion.model import robot_pose_at, slot_reference
@@ -216,27 +216,39 @@ def run_fast_batch(specs: Sequence, tol: Tolerance = Tolerance(), threads: int |
                               f"({dt:g} s), got {spec.duration:g} s")
         groups.setdefault((steps, dt), []).append(i)
     tolerance = np.array([tol.rho, tol.alpha, tol.beta])
-    helper = None
+    helper, helpers = None, []
     if not lqr_lanes._solve.signatures and any(s.controller in LQR_FAMILY for s in specs):
         # First LQR batch of this process: if the lanes' Riccati solver is not in the cache
-        # yet, a helper process compiles it while this one compiles the other kernels.
+        # yet, a helper process compiles it while this one compiles the other kernels, and
+        # a second one compiles the scalar cold solver (most batches need it for a few lanes
+        # in their first periods; all three share the two cores).
         helper = _jitcache.compile_in_helper(lqr_lanes.SOLVER, "companion.control.lqr_lanes",
                                              "compile_solver")
+        if helper is not None and not dare_gain_nb.signatures:
+            helpers.append(_jitcache.compile_in_helper(
+                lqr_lanes.COLD, "companion.control.lqr_lanes", "compile_cold_solver"))
     try:
         for (steps, dt), members in groups.items():
             for c0 in range(0, len(members), CHUNK):
                 chunk = members[c0:c0 + CHUNK]
                 rows = _run_chunk([specs[i] for i in chunk], steps, dt, tolerance, threads,
-                                  helper)
+                                  helper, helpers)
+                helper = None
                 for i, row in zip(chunk, rows):
                     out[i] = _metrics(row, steps, dt)
+        for started in helpers:    # let the cold solver reach the cache for later batches
+            _jitcache.wait_helper(started)
     finally:
-        _jitcache.stop_helper(helper)
+        for started in [helper] + helpers:
+            _jitcache.stop_helper(started)
     return out  # type: ignore[return-value]
 
 
 def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads: int,
-               helper=None) -> np.ndarray:
+               helper=None, helpers: list | None = None) -> np.ndarray:
+    """Metric accumulators of ``specs`` (one chunk of one length). ``helper`` compiles the
+    lanes' solver (waited for before the first period); ``helpers[0]``, if any, the scalar
+    cold solver (waited for at the first cold solve)."""
     n = len(specs)
     persons: dict[object, int] = {}
     tables = []
@@ -304,6 +316,9 @@ def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads:
         _observe(0, none, person, pidx, noise, noisy, np.empty((0, 5)))
         _account(0, dt, none, person, pidx, geo, np.empty((0, 2)), np.empty((0, 3)), tol, acc)
     _jitcache.wait_helper(helper)
+    for lanes, _ in tasks:
+        if helpers and isinstance(lanes, LaneSet):
+            lanes.cold_helper = helpers[0]
     if len(tasks) == 1:
         _drive(*tasks[0], steps, dt, shared)
     else:
