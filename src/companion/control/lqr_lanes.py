@@ -3,11 +3,13 @@
 Each lane is one :class:`companion.control.lqr.LqrController`: per sample period its relative
 state, feedforward and linearisation (:func:`_prepare`; zero-order-hold lanes then
 :func:`_zoh_models`), its Riccati equation (:func:`_solve`: Newton's iteration from an
-extrapolation of the lane's previous solutions (:func:`_warm_start`), for all lanes of a block
-at once, vectorised by :func:`companion.fastlqr.newton_lanes`), a stability check
-(:func:`_check`), the cold solver for lanes without a usable warm start (:func:`_cold`), and the
-output (:func:`_control`). :class:`LaneSet` holds the arrays; :func:`step_lanes` runs one
-period.
+extrapolation of the lane's previous solutions (:func:`_warm_start`), or from the solution at
+its rest operating point for a lane without one, for all lanes of a block at once,
+vectorised by :func:`companion.fastlqr.newton_lanes`; lanes that need more steps go on
+gathered into one block, :func:`_solve_on`), the gains (:func:`_gains`), a stability check
+(:func:`_check`), the scalar cold solver for lanes whose iteration failed (:func:`_cold`),
+and the output (:func:`_control`). :class:`LaneParams` holds the per-row parameters,
+:class:`LaneSet` the arrays; :func:`step_lanes` runs one period.
 
 The batch simulator (:mod:`companion.sim.fast_batch`) runs sets of many lanes. A lane's result
 does not depend on the other lanes of its set (a set of one gives the same bits). The gain
