@@ -25,21 +25,22 @@ def test_any_source_change_gives_a_new_digest(tmp_path):
 
 
 def test_lane_kernels_compile_and_the_solver_is_marked(monkeypatch, tmp_path):
-    """compile_solver runs the lanes' solver and marks it (a marked solver starts no
-    helper); compile_kernels runs the other lane kernels."""
+    """compile_solve_lanes and compile_sda run their kernels and mark them (a marked kernel
+    starts no helper); lqr_lanes.compile_kernels runs the other lane kernels."""
+    from companion import fastlqr
     from companion.control import lqr_lanes
 
     monkeypatch.setattr(_jitcache, "cache_dir", lambda: tmp_path)
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
-    assert _jitcache.active() and not _jitcache.is_compiled(lqr_lanes.SOLVER)
-    lqr_lanes.compile_solver()
-    assert lqr_lanes._solve.signatures
-    assert _jitcache.is_compiled(lqr_lanes.SOLVER)
-    assert _jitcache.compile_in_helper(lqr_lanes.SOLVER, "companion.control.lqr_lanes",
-                                       "compile_solver") is None
+    for name, function, kernel in ((fastlqr.SOLVE_LANES_KERNELS, "compile_solve_lanes",
+                                    fastlqr.solve_lanes),
+                                   (fastlqr.SDA_KERNELS, "compile_sda", fastlqr.sda_nb)):
+        assert _jitcache.active() and not _jitcache.is_compiled(name)
+        getattr(fastlqr, function)()
+        assert kernel.signatures and _jitcache.is_compiled(name)
+        assert _jitcache.compile_in_helper(name, "companion.fastlqr", function) is None
     lqr_lanes.compile_kernels()
-    for kernel in (lqr_lanes._prepare, lqr_lanes._gains,
-                   lqr_lanes._check, lqr_lanes._control):
+    for kernel in (lqr_lanes._prepare, lqr_lanes._check, lqr_lanes._control):
         assert kernel.signatures, kernel
     _jitcache.wait_helper(None)
 

@@ -96,10 +96,14 @@ def mark_compiled(name: str) -> None:
         pass
 
 
-def compile_in_helper(name: str, module: str, function: str) -> subprocess.Popen | None:
+def compile_in_helper(name: str, module: str, function: str, nice: int = 0
+                      ) -> subprocess.Popen | None:
     """Start ``module.function()`` in a helper Python process, which compiles the kernels
     called ``name`` into the cache while this process goes on; :func:`wait_helper` before the
     first call of any of them, so that this process loads them instead of compiling them too.
+
+    ``nice`` > 0 lowers the helper's scheduling priority (``os.nice``, where the system has
+    it), so that it takes the CPU time the other compilations leave.
 
     Returns None (nothing to wait for) where that would not help: this process does not cache
     in :func:`cache_dir`, the kernels are already cached, or the process cannot start.
@@ -107,7 +111,9 @@ def compile_in_helper(name: str, module: str, function: str) -> subprocess.Popen
     if not active() or is_compiled(name):
         return None
     try:
-        return subprocess.Popen([sys.executable, "-c", f"import {module}; {module}.{function}()"],
+        lower = f"import os; hasattr(os, 'nice') and os.nice({int(nice)}); " if nice > 0 else ""
+        return subprocess.Popen([sys.executable, "-c",
+                                 f"{lower}import {module}; {module}.{function}()"],
                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL)
     except OSError:

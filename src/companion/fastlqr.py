@@ -31,6 +31,8 @@ import math
 import numpy as np
 from numba import njit
 
+from companion import _jitcache
+
 #: SDA stops when the largest entry of the update of P is below this times the largest of P;
 #: the convergence is quadratic, so the iterate is then within ~1e-14 and the Newton polish
 #: (one step) finishes it. (1e-14 here costs one more doubling for the same result.)
@@ -73,6 +75,8 @@ _INLINE = {**_JIT, "inline": "always"}
 NX, NU = 5, 2
 #: Status of :func:`dare_gain_nb` (and of the stability tests).
 GAIN_FAILED, GAIN_STABLE, GAIN_UNDECIDED = 0, 1, 2
+#: Name of :func:`sda_nb` in the compile cache (:func:`compile_sda`).
+SDA_KERNELS = "sda"
 #: 5x5 scratch matrices of dare_gain_nb (_sda uses 0-7, the saved SDA solution is 8).
 _WORKSPACE = 9
 
@@ -684,6 +688,24 @@ def dare_gain_nb(a, b, q_diag, r_diag, p, k):
     return _radius_status(ws[0], 1.0 - RADIUS_MARGIN, ws[1], ws[2], NX), iterations
 
 
+@njit(**_JIT)
+def sda_nb(a, b, q_diag, r_diag, p):
+    """Step 1 of :func:`dare_gain_nb` alone (the structure-preserving doubling, no polish):
+    True if it converged; ``p`` receives the last iterate. The lanes
+    (:mod:`companion.control.lqr_lanes`) start their Newton iteration from it where their
+    own start failed."""
+    ok, _ = _sda(a, b, q_diag, r_diag, p, np.empty((_WORKSPACE, NX, NX)))
+    return ok
+
+
+def compile_sda() -> None:
+    """Compile (or load from the cache) :func:`sda_nb` on a dummy model and mark it compiled
+    (``SDA_KERNELS``); run in a helper process by a first batch
+    (:func:`companion._jitcache.compile_in_helper`)."""
+    sda_nb(0.5 * np.eye(NX), np.ones((NX, NU)), np.ones(NX), np.ones(NU), np.empty((NX, NX)))
+    _jitcache.mark_compiled(SDA_KERNELS)
+
+
 def spectral_radius_below(m, bound: float) -> bool:
     """Whether the spectral radius of the square real ``m`` is below ``bound``: the squaring
     test of :func:`_radius_status`, and where it cannot decide, the eigenvalues
@@ -920,7 +942,7 @@ LANES_DONE = 1e-9
 LANES_MAX_STEPS = 5
 LANES_LONG_STEPS = 40
 #: ... or when its next correction, predicted from the quadratic convergence with a safety
-#: factor, is below LANES_PREDICTED (see companion.control.lqr_lanes._solve). On the
+#: factor, is below LANES_PREDICTED (see solve_lanes). On the
 #: figure-8 the measured ratio of a correction to the square of the previous one was 0.2-2.2.
 LANES_PREDICTED = 1e-11
 LANES_SAFETY = 4.0
@@ -1107,3 +1129,130 @@ def newton_lanes(a, b, q_diag, r_diag, p, active, lanes, corr, proved):
                     x = p[i, j, e] + 0.5 * (d[i, j, e] + d[j, i, e])
                     p[i, j, e] = x
                     p[j, i, e] = x
+
+
+#: ``corr`` of a lane whose Newton iteration was still going when :func:`solve_lanes`
+#: stopped.
+LANES_UNFINISHED = 1.0
+#: Name of :func:`solve_lanes` in the compile cache (:func:`compile_solve_lanes`).
+SOLVE_LANES_KERNELS = "solve_lanes"
+
+
+@njit(**_INNER)
+def _warm_start_lane(p, past, history, lane, j):
+    """Replace ``p[:, :, j]`` = P(t-1) by the prediction of P(t) and shift it into
+    ``past[:, :, :, j]`` (P(t-2), P(t-3), P(t-4)), for a lane with ``history`` solved periods
+    in a row.
+
+    The prediction is the polynomial extrapolation of order 0 (``P(t-1)``), 1
+    (``2 P(t-1) - P(t-2)``) or 2 (``3 P(t-1) - 3 P(t-2) + P(t-3)``) that would have predicted
+    ``P(t-1)`` best from the periods before (order 0 with fewer than two periods, order 1 after two, as nothing can
+    be compared yet). On smooth motion that is order 2 (first Newton correction ~1e-6 of P
+    instead of ~3e-5 with order 1 on the figure-8); with sensor noise, order 0 (the
+    extrapolations amplify the noise)."""
+    h = history[lane]
+    order = 0
+    if h == 2:
+        order = 1
+    elif h >= 3:
+        e0 = 0.0
+        e1 = 0.0
+        e2 = 0.0 if h >= 4 else np.inf
+        for r in range(5):
+            for c in range(5):
+                p1, p2, p3, p4 = p[r, c, j], past[0, r, c, j], past[1, r, c, j], past[2, r, c, j]
+                e0 = max(e0, abs(p1 - p2))
+                e1 = max(e1, abs(p1 - (2.0 * p2 - p3)))
+                if h >= 4:
+                    e2 = max(e2, abs(p1 - (3.0 * p2 - 3.0 * p3 + p4)))
+        order = 0 if e0 <= min(e1, e2) else (1 if e1 <= e2 else 2)
+    for r in range(5):
+        for c in range(5):
+            p1, p2, p3 = p[r, c, j], past[0, r, c, j], past[1, r, c, j]
+            if order == 1:
+                p[r, c, j] = 2.0 * p1 - p2
+            elif order == 2:
+                p[r, c, j] = 3.0 * p1 - 3.0 * p2 + p3
+            past[2, r, c, j] = p3
+            past[1, r, c, j] = p2
+            past[0, r, c, j] = p1
+
+
+@njit(**_JIT, nogil=True)
+def solve_lanes(a, b, qd, rd, p, past, history, extrapolate, quad, active, steps, corr, proved,
+                k):
+    """At most ``steps`` Newton steps on the ``active`` lanes of every block, from their
+    ``p`` (first replaced by :func:`_warm_start_lane`'s prediction if ``extrapolate``; the
+    quadratic-convergence ratios then decay, see below). ``corr`` of an active lane ends 0
+    where it converged, ``LANES_UNFINISHED`` where it was still iterating after ``steps`` and inf where a step failed (the lane's ``p`` is then
+    its last successful iterate); ``proved`` True where its last step's squarings proved its
+    closed loop stable; ``k`` (blocks, 2, 5, L) each lane's gain from its ``p``
+    (:func:`_gain_lanes`) in the blocks with an active lane. Blocks without an active lane are
+    skipped.
+
+    A lane has converged after a step whose relative correction ``c`` is at most
+    ``LANES_DONE``, or when the next correction, predicted by the quadratic convergence of
+    Newton's method as ``quad c^2``, is below ``LANES_PREDICTED`` even with a safety factor
+    ``LANES_SAFETY`` (the error left in P is of the order of that next correction).
+    ``quad`` (per lane) is the largest recent ratio of a correction to the square of the one
+    before, decaying by ``LANES_QUAD_DECAY`` per period; it is only
+    measured from corrections above ``LANES_QUAD_MIN``, where rounding does not dominate the
+    next one. The predicted stop applies only to corrections below ``LANES_ACCEPT_MAX`` (2e-6
+    of P), so that an underestimated ratio (decayed, or not measured yet) leaves at most the
+    true ratio times 4e-12."""
+    blocks, block = a.shape[0], a.shape[3]
+    act = np.empty(block, np.bool_)
+    step_corr = np.empty(block)
+    last = np.empty(block)
+    for blk in range(blocks):
+        left = False
+        for j in range(block):
+            lane = blk * block + j
+            act[j] = active[lane]
+            left = left or act[j]
+            last[j] = np.inf
+            if act[j] and extrapolate:
+                _warm_start_lane(p[blk], past[blk], history, lane, j)
+                quad[lane] *= LANES_QUAD_DECAY
+        any_active = left
+        for _ in range(steps):
+            if not left:
+                break
+            newton_lanes(a[blk], b[blk], qd[blk], rd[blk], p[blk], act, block, step_corr,
+                         proved[blk])
+            left = False
+            for j in range(block):
+                if not act[j]:
+                    continue
+                lane = blk * block + j
+                c = step_corr[j]
+                if not c < np.inf:
+                    act[j] = False
+                    corr[blk, j] = np.inf
+                    continue
+                if last[j] >= LANES_QUAD_MIN and last[j] < np.inf:
+                    quad[lane] = max(quad[lane], c / (last[j] * last[j]))
+                predicted = LANES_SAFETY * quad[lane] * c * c
+                if c <= LANES_DONE or (c <= LANES_ACCEPT_MAX and predicted <= LANES_PREDICTED):
+                    act[j] = False
+                    corr[blk, j] = 0.0
+                else:
+                    last[j] = c
+                    left = True
+        for j in range(block):
+            if act[j]:
+                corr[blk, j] = LANES_UNFINISHED
+        if any_active:
+            _gain_lanes(a[blk], b[blk], rd[blk], p[blk], k[blk], block)
+
+
+def compile_solve_lanes() -> None:
+    """Compile (or load from the cache) :func:`solve_lanes`, the largest lane kernel, by
+    running it on one dummy lane; then mark it compiled. A first batch runs this in a helper
+    process (:func:`companion._jitcache.compile_in_helper`) while it compiles the other
+    kernels itself."""
+    solve_lanes(np.zeros((1, NX, NX, 1)), np.zeros((1, NX, NU, 1)), np.ones((1, NX, 1)),
+                np.ones((1, NU, 1)), np.zeros((1, NX, NX, 1)), np.zeros((1, 3, NX, NX, 1)),
+                np.zeros(1, np.int64), True, np.zeros(1), np.zeros(1, np.bool_), 1,
+                np.zeros((1, 1)), np.zeros((1, 1), np.bool_), np.zeros((1, NU, NX, 1)))
+    _jitcache.mark_compiled(SOLVE_LANES_KERNELS)

@@ -249,18 +249,22 @@ def test_lane_gains_stay_exact_after_a_long_straight_and_a_sudden_turn():
     assert worst <= 1e-9
 
 
-def test_lanes_start_from_the_rest_solution_without_the_scalar_solver(monkeypatch):
+@pytest.mark.parametrize("episodes, duration, noisy, restarts", [(2, 1.0, True, False),
+                                                                 (8, 2.0, False, True)])
+def test_lanes_start_from_the_rest_solution_without_the_scalar_solver(
+        monkeypatch, episodes, duration, noisy, restarts):
     """Lanes without a previous solution start Newton from their rest solution; lanes that
-    need more than the block's steps go on gathered (``_solve_on``). On the benchmark's
-    first batch (figure-8, noisy, starts off the slot) no lane needs the scalar cold solver,
-    and every lane's gain equals the cold gain of its model (so the first batch of a process
-    does not compile the scalar solver)."""
+    need more than the block's steps go on gathered (``_solve_on``); lanes whose start does
+    not stabilise their model restart from the doubling (``sda_nb``). On the benchmark's
+    first batch (figure-8, noisy, starts off the slot) no lane restarts; on 8 clean episodes
+    some do in their first periods. No lane needs the scalar cold solver, and every lane's
+    gain equals the cold gain of its model."""
     from companion.benchmark import batch_specs
     from companion.control import lqr_lanes
     from companion.sim.scenario import load_scenario
 
-    cold, gathered, worst = [], [], [0.0]
-    solve_on, control = lqr_lanes._solve_on, lqr_lanes._control
+    cold, gathered, worst, sda = [], [], [0.0], []
+    solve_on, control, sda_nb = lqr_lanes._solve_on, lqr_lanes._control, lqr_lanes.sda_nb
     sets = []
     init = lqr_lanes.LaneSet.__init__
 
@@ -289,6 +293,9 @@ def test_lanes_start_from_the_rest_solution_without_the_scalar_solver(monkeypatc
     monkeypatch.setattr(lqr_lanes, "_control", check_control)
     monkeypatch.setattr(lqr_lanes, "stabilising_gain",
                         lambda *args: cold.append(1) or fastlqr.stabilising_gain(*args))
-    run_fast_batch(batch_specs(load_scenario("figure8"), 2, 1.0, noisy=True), threads=1)
+    monkeypatch.setattr(lqr_lanes, "sda_nb", lambda *args: sda.append(sda_nb(*args)) or sda[-1])
+    run_fast_batch(batch_specs(load_scenario("figure8"), episodes, duration, noisy=noisy),
+                   threads=1)
     assert cold == [] and len(gathered) >= 1
+    assert (len(sda) > 0 and all(sda)) if restarts else sda == []
     assert worst[0] <= 1e-9

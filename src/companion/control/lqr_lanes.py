@@ -2,11 +2,11 @@
 
 Each lane is one :class:`companion.control.lqr.LqrController`: per sample period its relative
 state, feedforward and linearisation (:func:`_prepare`; zero-order-hold lanes then
-:func:`_zoh_models`), its Riccati equation (:func:`_solve`: Newton's iteration from an
-extrapolation of the lane's previous solutions (:func:`_warm_start`), or from the solution at
+:func:`_zoh_models`), its Riccati equation (:func:`companion.fastlqr.solve_lanes`: Newton's
+iteration from an extrapolation of the lane's previous solutions, or from the solution at
 its rest operating point for a lane without one, for all lanes of a block at once,
 vectorised by :func:`companion.fastlqr.newton_lanes`; lanes that need more steps go on
-gathered into one block, :func:`_solve_on`), the gains (:func:`_gains`), a stability check
+gathered into one block, :func:`_solve_on`; and the gains), a stability check
 (:func:`_check`), the scalar cold solver for lanes whose iteration failed (:func:`_cold`),
 and the output (:func:`_control`). :class:`LaneParams` holds the per-row parameters,
 :class:`LaneSet` the arrays; :func:`step_lanes` runs one period.
@@ -30,24 +30,17 @@ from numba import njit
 
 from companion import _jitcache
 from companion.control.lqr import reference_solution, rest_operating_point
-from companion.fastlqr import (CONFIG_FIELDS, LANES_ACCEPT_MAX, LANES_DONE,
-                               LANES_LONG_STEPS, LANES_MAX_STEPS, LANES_PREDICTED,
-                               LANES_QUAD_DECAY, LANES_QUAD_MIN, LANES_SAFETY, _gain_lanes,
-                               lqr_step_config, model_euler_nb, model_zoh_nb, newton_lanes,
-                               relative_state_nb, slot_reference_nb, stabilising_gain,
+from companion.fastlqr import (CONFIG_FIELDS, LANES_LONG_STEPS, LANES_MAX_STEPS,
+                               LANES_UNFINISHED, RADIUS_MARGIN, lqr_step_config,
+                               model_euler_nb, model_zoh_nb, relative_state_nb,
+                               sda_nb, slot_reference_nb, solve_lanes, stabilising_gain,
                                wrap_pi_nb)
 from companion.params import Params
 
-#: Name of :func:`_solve` in the compile cache (:func:`compile_solver`).
-SOLVER = "lqr_lanes_solve"
-#: Name of the scalar cold solver in the compile cache (:func:`compile_cold_solver`).
-COLD = "lqr_lanes_cold"
 
 _NB = {"cache": True, "nogil": True, "error_model": "numpy", "no_cfunc_wrapper": True}
 #: Functions only called from compiled code: no Python wrapper to compile.
 _INNER = {**_NB, "no_cpython_wrapper": True}
-#: ``corr`` of a lane whose Newton iteration was still going when :func:`_solve` stopped.
-LANES_UNFINISHED = 1.0
 
 
 @njit(**_INNER)
@@ -123,125 +116,13 @@ def _zoh_models(idx, config, lin, a, b):
         _to_lane(a2, b2, a[lane // block], b[lane // block], lane % block)
 
 
-@njit(**_INNER)
-def _warm_start(p, past, history, lane, j):
-    """Replace ``p[:, :, j]`` = P(t-1) by the prediction of P(t) and shift it into
-    ``past[:, :, :, j]`` (P(t-2), P(t-3), P(t-4)), for a lane with ``history`` solved periods
-    in a row.
-
-    The prediction is the polynomial extrapolation of order 0 (``P(t-1)``), 1
-    (``2 P(t-1) - P(t-2)``) or 2 (``3 P(t-1) - 3 P(t-2) + P(t-3)``) that would have predicted
-    ``P(t-1)`` best from the periods before (order 0 with fewer than two periods, order 1 after two, as nothing can
-    be compared yet). On smooth motion that is order 2 (first Newton correction ~1e-6 of P
-    instead of ~3e-5 with order 1 on the figure-8); with sensor noise, order 0 (the
-    extrapolations amplify the noise)."""
-    h = history[lane]
-    order = 0
-    if h == 2:
-        order = 1
-    elif h >= 3:
-        e0 = 0.0
-        e1 = 0.0
-        e2 = 0.0 if h >= 4 else np.inf
-        for r in range(5):
-            for c in range(5):
-                p1, p2, p3, p4 = p[r, c, j], past[0, r, c, j], past[1, r, c, j], past[2, r, c, j]
-                e0 = max(e0, abs(p1 - p2))
-                e1 = max(e1, abs(p1 - (2.0 * p2 - p3)))
-                if h >= 4:
-                    e2 = max(e2, abs(p1 - (3.0 * p2 - 3.0 * p3 + p4)))
-        order = 0 if e0 <= min(e1, e2) else (1 if e1 <= e2 else 2)
-    for r in range(5):
-        for c in range(5):
-            p1, p2, p3 = p[r, c, j], past[0, r, c, j], past[1, r, c, j]
-            if order == 1:
-                p[r, c, j] = 2.0 * p1 - p2
-            elif order == 2:
-                p[r, c, j] = 3.0 * p1 - 3.0 * p2 + p3
-            past[2, r, c, j] = p3
-            past[1, r, c, j] = p2
-            past[0, r, c, j] = p1
-
-
-@njit(**_NB)
-def _solve(a, b, qd, rd, p, past, history, extrapolate, quad, active, steps, corr, proved):
-    """At most ``steps`` Newton steps on the ``active`` lanes of every block, from their
-    ``p`` (first replaced by :func:`_warm_start`'s prediction if ``extrapolate``; the
-    quadratic-convergence ratios then decay, see below). ``corr`` of an active lane ends 0 where it converged, ``LANES_UNFINISHED`` where it
-    was still iterating after ``steps`` and inf where a step failed (the lane's ``p`` is then
-    its last successful iterate); ``proved`` True where its last step's squarings proved its
-    closed loop stable. Blocks without an active lane are skipped.
-
-    A lane has converged after a step whose relative correction ``c`` is at most
-    ``LANES_DONE``, or when the next correction, predicted by the quadratic convergence of
-    Newton's method as ``quad c^2``, is below ``LANES_PREDICTED`` even with a safety factor
-    ``LANES_SAFETY`` (the error left in P is of the order of that next correction).
-    ``quad`` (per lane) is the largest recent ratio of a correction to the square of the one
-    before, decaying by ``LANES_QUAD_DECAY`` per period; it is only
-    measured from corrections above ``LANES_QUAD_MIN``, where rounding does not dominate the
-    next one. The predicted stop applies only to corrections below ``LANES_ACCEPT_MAX`` (2e-6
-    of P), so that an underestimated ratio (decayed, or not measured yet) leaves at most the
-    true ratio times 4e-12."""
-    blocks, block = a.shape[0], a.shape[3]
-    act = np.empty(block, np.bool_)
-    step_corr = np.empty(block)
-    last = np.empty(block)
-    for blk in range(blocks):
-        left = False
-        for j in range(block):
-            lane = blk * block + j
-            act[j] = active[lane]
-            left = left or act[j]
-            last[j] = np.inf
-            if act[j] and extrapolate:
-                _warm_start(p[blk], past[blk], history, lane, j)
-                quad[lane] *= LANES_QUAD_DECAY
-        for _ in range(steps):
-            if not left:
-                break
-            newton_lanes(a[blk], b[blk], qd[blk], rd[blk], p[blk], act, block, step_corr,
-                         proved[blk])
-            left = False
-            for j in range(block):
-                if not act[j]:
-                    continue
-                lane = blk * block + j
-                c = step_corr[j]
-                if not c < np.inf:
-                    act[j] = False
-                    corr[blk, j] = np.inf
-                    continue
-                if last[j] >= LANES_QUAD_MIN and last[j] < np.inf:
-                    quad[lane] = max(quad[lane], c / (last[j] * last[j]))
-                predicted = LANES_SAFETY * quad[lane] * c * c
-                if c <= LANES_DONE or (c <= LANES_ACCEPT_MAX and predicted <= LANES_PREDICTED):
-                    act[j] = False
-                    corr[blk, j] = 0.0
-                else:
-                    last[j] = c
-                    left = True
-        for j in range(block):
-            if act[j]:
-                corr[blk, j] = LANES_UNFINISHED
-
-
-@njit(**_NB)
-def _gains(a, b, rd, p, k, active):
-    """Each lane's gain from its ``p`` (:func:`companion.fastlqr._gain_lanes`), in the blocks
-    with an active lane."""
-    blocks, block = a.shape[0], a.shape[3]
-    for blk in range(blocks):
-        if active[blk * block:(blk + 1) * block].any():
-            _gain_lanes(a[blk], b[blk], rd[blk], p[blk], k[blk], block)
-
-
 @njit(**_NB)
 def _check(idx, k, corr, proved, active, retry, warm, history, gain, has_gain, need_cold):
-    """For the lanes solved by :func:`_solve` (``active``, which this clears): accept a
+    """For the lanes solved by :func:`companion.fastlqr.solve_lanes` (``active``, which this clears): accept a
     lane's gain if its Newton iteration converged and the squarings of its last Smith
     doubling proved the closed loop stable (``proved``, see
     :func:`companion.fastlqr.newton_lanes`). If ``retry``, a lane still iterating stays
-    active for a longer :func:`_solve`; the number of such lanes is returned. Every other lane
+    active for a longer solve; the number of such lanes is returned. Every other lane
     is flagged for the cold solver (which also settles undecided closed loops by their
     eigenvalues); ``need_cold`` of the lanes not active is left as it is. The proof concerns the gain the last Newton step started from, which
     differs from the accepted one by that step's correction (below 1e-9, or below 2e-6 and
@@ -367,7 +248,7 @@ class LaneSet:
         self.b = np.zeros((blocks, 5, 2, block))
         self.p = np.zeros((blocks, 5, 5, block))
         self.past = np.zeros((blocks, 3, 5, 5, block))   # P of the 3 periods before p's
-        self.quad = np.zeros(n)                # quadratic-convergence constant (see _solve)
+        self.quad = np.zeros(n)                # quadratic-convergence constant (solve_lanes)
         self.k = np.zeros((blocks, 2, 5, block))
         self.qd = np.ones((blocks, 5, block))
         self.rd = np.ones((blocks, 2, block))
@@ -391,62 +272,115 @@ class LaneSet:
         self.vw = np.zeros((n, 2))             # output v, omega
         self.observed = np.zeros((n, 5))       # person x, y, theta, v, omega (input)
         self.pose = np.zeros((n, 3))           # robot x, y, theta (input)
-        #: A process compiling the scalar cold solver (:func:`compile_cold_solver`), waited
-        #: for before the first cold solve, so that this process loads it instead.
+        #: A process compiling :func:`companion.fastlqr.sda_nb`
+        #: (:func:`companion.fastlqr.compile_sda`), waited for before its first use, so that
+        #: this process loads it instead.
         self.cold_helper: subprocess.Popen | None = None
 
 
-def _cold(lanes: LaneSet, params: LaneParams) -> None:
-    """The scalar solver (:func:`companion.fastlqr.stabilising_gain`, cold doubling) for the
-    lanes :func:`_check` flagged, on the lane's model; a lane without any stabilising gain
-    keeps its last one (or gets its row's rest gain) and starts its next period from the rest
-    solution."""
-    if not lanes.need_cold.any():
+def _lane_model(L: LaneSet, lane: int) -> tuple[np.ndarray, np.ndarray]:
+    blk, j = divmod(lane, L.block)
+    return (np.ascontiguousarray(L.a[blk, :, :, j]), np.ascontiguousarray(L.b[blk, :, :, j]))
+
+
+def _no_gain(L: LaneSet, lane: int, params: LaneParams) -> None:
+    """A lane without a stabilising gain this period keeps its last one (or gets its row's
+    rest gain) and starts its next period from the rest solution."""
+    L.warm[lane] = False
+    L.history[lane] = 0
+    if not L.has_gain[lane]:
+        L.gain[lane] = params.rest_gain[L.idx[lane]]
+        L.has_gain[lane] = True
+
+
+def _accept(L: LaneSet, lane: int, k: np.ndarray) -> None:
+    L.gain[lane] = k
+    L.has_gain[lane] = True
+    L.warm[lane] = True
+    L.history[lane] = min(L.history[lane] + 1, 4)
+
+
+def _sda_start(L: LaneSet, params: LaneParams) -> int:
+    """For the lanes whose iteration failed (:func:`_check` flagged them, ``corr`` inf: the
+    start did not stabilise the lane's model): start again from the doubling of
+    :func:`companion.fastlqr.sda_nb` (made active for the long pass; returns how many), or,
+    where it does not converge (no stabilising solution), no gain this period."""
+    corr = L.corr.reshape(-1)
+    failed = np.flatnonzero(L.need_cold & (corr == np.inf))
+    if failed.size == 0:
+        return 0
+    _jitcache.wait_helper(L.cold_helper)
+    L.cold_helper = None
+    p = np.empty((5, 5))
+    started = 0
+    for lane in failed:
+        lane = int(lane)
+        g = L.idx[lane]
+        a, b = _lane_model(L, lane)
+        L.need_cold[lane] = False
+        if sda_nb(a, b, params.q_diag[g], params.r_diag[g], p):
+            blk, j = divmod(lane, L.block)
+            L.p[blk, :, :, j] = p
+            L.history[lane] = 0
+            L.active[lane] = True
+            started += 1
+        else:
+            _no_gain(L, lane, params)
+    return started
+
+
+def _cold(L: LaneSet, params: LaneParams) -> None:
+    """The lanes :func:`_check` flagged after the long pass. A converged lane whose closed
+    loop the squarings could not prove stable is decided by its eigenvalues (as the scalar
+    solver decides its undecided closed loops); any other (the iteration from the doubling
+    failed too, which the tests have not met) takes the scalar solver
+    (:func:`companion.fastlqr.stabilising_gain`: doubling, Newton polish and stability test);
+    a lane without a stabilising gain gets :func:`_no_gain`."""
+    if not L.need_cold.any():
         return
-    _jitcache.wait_helper(lanes.cold_helper)
-    lanes.cold_helper = None
+    corr = L.corr.reshape(-1)
     k_cold = np.empty((2, 5))
     p_cold = np.empty((5, 5))
-    for lane in np.flatnonzero(lanes.need_cold):
-        g = lanes.idx[lane]
-        blk, j = divmod(int(lane), lanes.block)
-        a = np.ascontiguousarray(lanes.a[blk, :, :, j])
-        b = np.ascontiguousarray(lanes.b[blk, :, :, j])
-        if stabilising_gain(a, b, params.q_diag[g], params.r_diag[g], p_cold, k_cold):
-            lanes.gain[lane] = k_cold
-            lanes.has_gain[lane] = True
-            lanes.p[blk, :, :, j] = p_cold
-            lanes.warm[lane] = True
-            lanes.history[lane] = 1
+    for lane in np.flatnonzero(L.need_cold):
+        lane = int(lane)
+        g = L.idx[lane]
+        blk, j = divmod(lane, L.block)
+        a, b = _lane_model(L, lane)
+        if corr[lane] == 0.0:
+            k = np.ascontiguousarray(L.k[blk, :, :, j])
+            if float(np.max(np.abs(np.linalg.eigvals(a - b @ k)))) < 1.0 - RADIUS_MARGIN:
+                _accept(L, lane, k)
+            else:
+                _no_gain(L, lane, params)
+        elif stabilising_gain(a, b, params.q_diag[g], params.r_diag[g], p_cold, k_cold):
+            L.p[blk, :, :, j] = p_cold
+            L.history[lane] = 0
+            _accept(L, lane, k_cold)
         else:
-            lanes.warm[lane] = False
-            lanes.history[lane] = 0
-            if not lanes.has_gain[lane]:
-                lanes.gain[lane] = params.rest_gain[g]
-                lanes.has_gain[lane] = True
+            _no_gain(L, lane, params)
 
 
 def _lanes_solve(L: LaneSet, params: LaneParams) -> None:
     """The compiled part of a period up to the cold solver: model, Newton (all lanes
-    ``LANES_MAX_STEPS`` steps, then the lanes still iterating gathered into one block, up
-    to ``LANES_LONG_STEPS`` in all), check."""
+    ``LANES_MAX_STEPS`` steps; then the lanes still iterating, and those whose start failed
+    from the doubling, gathered into one block, up to ``LANES_LONG_STEPS`` in all), check."""
     config = params.config
     _prepare(L.idx, L.observed, L.pose, config, L.mem, L.ref, L.err, L.lin, L.a, L.b, L.warm,
              params.rest_p, L.p, L.history, L.active)
     if config[:, 2].any():
         _zoh_models(L.idx, config, L.lin, L.a, L.b)
-    _solve(L.a, L.b, L.qd, L.rd, L.p, L.past, L.history, True, L.quad, L.active,
-           LANES_MAX_STEPS, L.corr, L.proved)
-    _gains(L.a, L.b, L.rd, L.p, L.k, L.active)
-    if _check(L.idx, L.k, L.corr, L.proved, L.active, True, L.warm, L.history, L.gain,
-              L.has_gain, L.need_cold):
+    solve_lanes(L.a, L.b, L.qd, L.rd, L.p, L.past, L.history, True, L.quad, L.active,
+                LANES_MAX_STEPS, L.corr, L.proved, L.k)
+    retries = _check(L.idx, L.k, L.corr, L.proved, L.active, True, L.warm, L.history, L.gain,
+                     L.has_gain, L.need_cold)
+    if retries + _sda_start(L, params):
         _solve_on(L, np.flatnonzero(L.active), LANES_LONG_STEPS - LANES_MAX_STEPS)
         _check(L.idx, L.k, L.corr, L.proved, L.active, False, L.warm, L.history, L.gain,
                L.has_gain, L.need_cold)
 
 
 def _solve_on(L: LaneSet, lanes: np.ndarray, steps: int) -> None:
-    """:func:`_solve` and :func:`_gains` on the given lanes only, gathered into one block (a
+    """:func:`companion.fastlqr.solve_lanes` on the given lanes only, gathered into one block (a
     few lanes scattered over many blocks would otherwise cost a whole block's work each);
     a lane's result does not depend on where it is solved."""
     blk, j = np.divmod(lanes, L.block)
@@ -460,8 +394,8 @@ def _solve_on(L: LaneSet, lanes: np.ndarray, steps: int) -> None:
     corr = np.empty((1, lanes.size))
     proved = np.zeros((1, lanes.size), np.bool_)
     active = np.ones(lanes.size, np.bool_)
-    _solve(a, b, qd, rd, p, L.past, L.history, False, quad, active, steps, corr, proved)
-    _gains(a, b, rd, p, k, active)
+    solve_lanes(a, b, qd, rd, p, L.past, L.history, False, quad, active, steps, corr, proved,
+                k)
     L.p[blk, ..., j] = np.moveaxis(p[0], -1, 0)
     L.k[blk, ..., j] = np.moveaxis(k[0], -1, 0)
     L.quad[lanes] = quad
@@ -486,36 +420,14 @@ def _dummy() -> tuple[LaneSet, LaneParams]:
     return LaneSet(np.zeros(1, np.int64), 1, params), params
 
 
-def compile_solver() -> None:
-    """Compile (or load from the cache) :func:`_solve`, the largest lane kernel, by running
-    it on one dummy lane; then mark it compiled (:func:`companion._jitcache.mark_compiled`).
-    :mod:`companion.sim.fast_batch` runs this in a helper process on a first batch, while it
-    compiles the other kernels itself (:func:`compile_kernels`)."""
-    L, _ = _dummy()
-    _solve(L.a, L.b, L.qd, L.rd, L.p, L.past, L.history, True, L.quad, L.active, 1, L.corr,
-           L.proved)
-    _jitcache.mark_compiled(SOLVER)
-
-
-def compile_cold_solver() -> None:
-    """Compile (or load from the cache) the scalar cold solver of :func:`_cold`
-    (:func:`companion.fastlqr.stabilising_gain`) on a dummy model, then mark it compiled.
-    :mod:`companion.sim.fast_batch` runs this in a helper process while a first batch
-    runs."""
-    a, b = 0.5 * np.eye(5), np.ones((5, 2))
-    stabilising_gain(a, b, np.ones(5), np.ones(2), np.empty((5, 5)), np.empty((2, 5)))
-    _jitcache.mark_compiled(COLD)
-
-
 def compile_kernels() -> None:
     """Compile (or load from the cache) the lane kernels of :func:`step_lanes` except
-    :func:`_solve`, the scalar cold solver and the zero-order-hold models, by running them on
-    one dummy lane."""
+    :func:`companion.fastlqr.solve_lanes`, the doubling and scalar solvers of restarts and
+    cold solves, and the zero-order-hold models, by running them on one dummy lane."""
     L, params = _dummy()
     config = params.config
     _prepare(L.idx, L.observed, L.pose, config, L.mem, L.ref, L.err, L.lin, L.a, L.b, L.warm,
              params.rest_p, L.p, L.history, L.active)
-    _gains(L.a, L.b, L.rd, L.p, L.k, L.active)
     _check(L.idx, L.k, L.corr, L.proved, L.active, True, L.warm, L.history, L.gain,
            L.has_gain, L.need_cold)
     _control(L.idx, config, L.gain, L.mem, L.ref, L.err, L.xi, L.vw)

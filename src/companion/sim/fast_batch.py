@@ -30,7 +30,8 @@ from companion.control import CONTROLLERS, lqr_lanes
 from companion.errors import ConfigError
 from companion.control.baseline_lanes import KINDS, STATE_SIZE, BaselineLanes, baseline_config
 from companion.control.lqr_lanes import LaneSet, step_lanes
-from companion.fastlqr import dare_gain_nb, relative_state_nb, slot_reference_nb
+from companion.fastlqr import (SDA_KERNELS, SOLVE_LANES_KERNELS, relative_state_nb, sda_nb,
+                               slot_reference_nb, solve_lanes)
 from companion.kinematics import unicycle_step
 from companion.metrics import Tolerance
 from companion.model import robot_pose_at, slot_reference
@@ -217,16 +218,17 @@ def run_fast_batch(specs: Sequence, tol: Tolerance = Tolerance(), threads: int |
         groups.setdefault((steps, dt), []).append(i)
     tolerance = np.array([tol.rho, tol.alpha, tol.beta])
     helper, helpers = None, []
-    if not lqr_lanes._solve.signatures and any(s.controller in LQR_FAMILY for s in specs):
+    if not solve_lanes.signatures and any(s.controller in LQR_FAMILY for s in specs):
         # First LQR batch of this process: if the lanes' Riccati solver is not in the cache
         # yet, a helper process compiles it while this one compiles the other kernels, and
-        # a second one compiles the scalar cold solver (most batches need it for a few lanes
-        # in their first periods; all three share the two cores).
-        helper = _jitcache.compile_in_helper(lqr_lanes.SOLVER, "companion.control.lqr_lanes",
-                                             "compile_solver")
-        if helper is not None and not dare_gain_nb.signatures:
-            helpers.append(_jitcache.compile_in_helper(
-                lqr_lanes.COLD, "companion.control.lqr_lanes", "compile_cold_solver"))
+        # a second one compiles the doubling that restarts lanes whose iteration failed (most
+        # batches need it for a few lanes in their first periods; all three share the two
+        # cores).
+        helper = _jitcache.compile_in_helper(SOLVE_LANES_KERNELS, "companion.fastlqr",
+                                             "compile_solve_lanes")
+        if helper is not None and not sda_nb.signatures:
+            helpers.append(_jitcache.compile_in_helper(SDA_KERNELS, "companion.fastlqr",
+                                                       "compile_sda", nice=10))
     try:
         for (steps, dt), members in groups.items():
             for c0 in range(0, len(members), CHUNK):
@@ -236,7 +238,7 @@ def run_fast_batch(specs: Sequence, tol: Tolerance = Tolerance(), threads: int |
                 helper = None
                 for i, row in zip(chunk, rows):
                     out[i] = _metrics(row, steps, dt)
-        for started in helpers:    # let the cold solver reach the cache for later batches
+        for started in helpers:    # let the doubling reach the cache for later batches
             _jitcache.wait_helper(started)
     finally:
         for started in [helper] + helpers:
@@ -247,8 +249,8 @@ def run_fast_batch(specs: Sequence, tol: Tolerance = Tolerance(), threads: int |
 def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads: int,
                helper=None, helpers: list | None = None) -> np.ndarray:
     """Metric accumulators of ``specs`` (one chunk of one length). ``helper`` compiles the
-    lanes' solver (waited for before the first period); ``helpers[0]``, if any, the scalar
-    cold solver (waited for at the first cold solve)."""
+    lanes' solver (waited for before the first period); ``helpers[0]``, if any, the
+    doubling of the lanes' restarts (waited for at the first restart)."""
     n = len(specs)
     persons: dict[object, int] = {}
     tables = []
