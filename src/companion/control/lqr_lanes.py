@@ -118,16 +118,16 @@ def _zoh_models(idx, config, lin, a, b):
 
 @njit(**_NB)
 def _check(idx, k, corr, proved, active, retry, warm, history, gain, has_gain, need_cold):
-    """For the lanes solved by :func:`companion.fastlqr.solve_lanes` (``active``, which this clears): accept a
-    lane's gain if its Newton iteration converged and the squarings of its last Smith
-    doubling proved the closed loop stable (``proved``, see
+    """For the lanes solved by :func:`companion.fastlqr.solve_lanes` (``active``, which
+    this clears): accept a lane's gain if its Newton iteration converged and the squarings of
+    its last Smith doubling proved the closed loop stable (``proved``, see
     :func:`companion.fastlqr.newton_lanes`). If ``retry``, a lane still iterating stays
-    active for a longer solve; the number of such lanes is returned. Every other lane
-    is flagged for the cold solver (which also settles undecided closed loops by their
-    eigenvalues); ``need_cold`` of the lanes not active is left as it is. The proof concerns the gain the last Newton step started from, which
-    differs from the accepted one by that step's correction (below 1e-9, or below 2e-6 and
-    predicted below 1e-11, of P), against a margin of at least 1.7e-4 in spectral radius that
-    the proof gives."""
+    active for a longer solve; the number of such lanes is returned. Every other lane is
+    flagged (``need_cold``) for :func:`_sda_start` (its iteration failed) or :func:`_cold`;
+    ``need_cold`` of the lanes not active is left as it is. The proof concerns the gain the
+    last Newton step started from, which differs from the accepted one by that step's
+    correction (below 1e-9, or below 2e-6 and predicted below 1e-11, of P), against a margin
+    of at least 1.7e-4 in spectral radius that the proof gives."""
     blocks, block = k.shape[0], k.shape[3]
     retries = 0
     for blk in range(blocks):
@@ -275,7 +275,7 @@ class LaneSet:
         #: A process compiling :func:`companion.fastlqr.sda_nb`
         #: (:func:`companion.fastlqr.compile_sda`), waited for before its first use, so that
         #: this process loads it instead.
-        self.cold_helper: subprocess.Popen | None = None
+        self.sda_helper: subprocess.Popen | None = None
 
 
 def _lane_model(L: LaneSet, lane: int) -> tuple[np.ndarray, np.ndarray]:
@@ -309,8 +309,8 @@ def _sda_start(L: LaneSet, params: LaneParams) -> int:
     failed = np.flatnonzero(L.need_cold & (corr == np.inf))
     if failed.size == 0:
         return 0
-    _jitcache.wait_helper(L.cold_helper)
-    L.cold_helper = None
+    _jitcache.wait_helper(L.sda_helper)
+    L.sda_helper = None
     p = np.empty((5, 5))
     started = 0
     for lane in failed:

@@ -320,7 +320,7 @@ def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads:
     _jitcache.wait_helper(helper)
     for lanes, _ in tasks:
         if helpers and isinstance(lanes, LaneSet):
-            lanes.cold_helper = helpers[0]
+            lanes.sda_helper = helpers[0]
     if len(tasks) == 1:
         _drive(*tasks[0], steps, dt, shared)
     else:
