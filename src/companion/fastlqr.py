@@ -688,7 +688,7 @@ def dare_gain_nb(a, b, q_diag, r_diag, p, k):
     return _radius_status(ws[0], 1.0 - RADIUS_MARGIN, ws[1], ws[2], NX), iterations
 
 
-@njit(**_JIT)
+@njit(**_JIT, nogil=True)
 def sda_nb(a, b, q_diag, r_diag, p):
     """Step 1 of :func:`dare_gain_nb` alone (the structure-preserving doubling, no polish):
     True if it converged; ``p`` receives the last iterate. The lanes
@@ -930,8 +930,10 @@ def lqr_output_nb(found, k, gain, rest_gain, memory, xi, op, config):
 # equations solved by Smith's doubling: matrix products only, no pivoting, no branches per
 # lane. A lane without a previous solution starts from the solution at its rest operating
 # point (computed once per parameter set). Lanes where the iteration fails (its start does not
-# stabilise the model) or where the squaring test cannot prove the closed loop stable take the
-# scalar cold path (stabilising_gain).
+# stabilise the model) restart from the doubling alone (sda_nb); converged lanes whose closed
+# loop the squaring test cannot prove stable are decided by their eigenvalues; only a lane
+# that fails after the restart takes the scalar solver (stabilising_gain). See
+# companion.control.lqr_lanes.
 
 #: A lane's Newton iteration stops after a correction below this times its P: the error left
 #: is then of the order of its square (quadratic convergence), ~1e-18 ...
@@ -1146,8 +1148,8 @@ def _warm_start_lane(p, past, history, lane, j):
 
     The prediction is the polynomial extrapolation of order 0 (``P(t-1)``), 1
     (``2 P(t-1) - P(t-2)``) or 2 (``3 P(t-1) - 3 P(t-2) + P(t-3)``) that would have predicted
-    ``P(t-1)`` best from the periods before (order 0 with fewer than two periods, order 1 after two, as nothing can
-    be compared yet). On smooth motion that is order 2 (first Newton correction ~1e-6 of P
+    ``P(t-1)`` best from the periods before (order 0 with fewer than two periods, order 1
+    after two, as nothing can be compared yet). On smooth motion that is order 2 (first Newton correction ~1e-6 of P
     instead of ~3e-5 with order 1 on the figure-8); with sensor noise, order 0 (the
     extrapolations amplify the noise)."""
     h = history[lane]
@@ -1184,8 +1186,8 @@ def solve_lanes(a, b, qd, rd, p, past, history, extrapolate, quad, active, steps
     """At most ``steps`` Newton steps on the ``active`` lanes of every block, from their
     ``p`` (first replaced by :func:`_warm_start_lane`'s prediction if ``extrapolate``; the
     quadratic-convergence ratios then decay, see below). ``corr`` of an active lane ends 0
-    where it converged, ``LANES_UNFINISHED`` where it was still iterating after ``steps`` and inf where a step failed (the lane's ``p`` is then
-    its last successful iterate); ``proved`` True where its last step's squarings proved its
+    where it converged, ``LANES_UNFINISHED`` where it was still iterating after ``steps`` and
+    inf where a step failed (the lane's ``p`` is then its last successful iterate); ``proved`` True where its last step's squarings proved its
     closed loop stable; ``k`` (blocks, 2, 5, L) each lane's gain from its ``p``
     (:func:`_gain_lanes`) in the blocks with an active lane. Blocks without an active lane are
     skipped.

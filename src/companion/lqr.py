@@ -12,6 +12,7 @@ increment ``du = u_e(k) - u_e(k-1)``:
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import solve_discrete_are
 
 
 def augment(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -94,7 +95,6 @@ def dlqr(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray, check: bool
         if a.shape != (n, n):
             raise ValueError(f"dlqr: A must be ({n}, {n}) to match B {b.shape}, got {a.shape}")
         _check_weights(q, r, n, m)
-    from scipy.linalg import solve_discrete_are   # here: compile helpers do not need scipy
     p = solve_discrete_are(a, b, q, r)
     bt_p = b.T @ p
     k = np.linalg.solve(r + bt_p @ b, bt_p @ a)

@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import expm
 
 from companion.kinematics import offset_point, wrap_2pi, wrap_pi
 
@@ -117,7 +118,6 @@ def discretize(jx: np.ndarray, ju: np.ndarray, dt: float, method: str = "euler"
     if method == "euler":
         return np.eye(n) + dt * jx, dt * ju
     if method == "zoh":
-        from scipy.linalg import expm   # here: a compile helper process imports this module
         block = np.zeros((n + m, n + m))
         block[:n, :n] = jx
         block[:n, n:] = ju

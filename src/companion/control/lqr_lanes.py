@@ -7,8 +7,10 @@ iteration from an extrapolation of the lane's previous solutions, or from the so
 its rest operating point for a lane without one, for all lanes of a block at once,
 vectorised by :func:`companion.fastlqr.newton_lanes`; lanes that need more steps go on
 gathered into one block, :func:`_solve_on`; and the gains), a stability check
-(:func:`_check`), the scalar cold solver for lanes whose iteration failed (:func:`_cold`),
-and the output (:func:`_control`). :class:`LaneParams` holds the per-row parameters,
+(:func:`_check`), a restart from the doubling for lanes whose iteration failed
+(:func:`_sda_start`, then the gathered pass), the eigenvalues for converged lanes the check
+could not prove stable and the scalar solver for lanes that fail after the restart
+(:func:`_cold`), and the output (:func:`_control`). :class:`LaneParams` holds the per-row parameters,
 :class:`LaneSet` the arrays; :func:`step_lanes` runs one period.
 
 The batch simulator (:mod:`companion.sim.fast_batch`) runs sets of many lanes. A lane's result
@@ -194,7 +196,9 @@ class LaneParams:
         Gain and Riccati solution at the rest operating point
         (:func:`companion.control.lqr.rest_operating_point`): the gain is the fallback of a
         lane that has never had a stabilising gain, the solution the start of a lane's
-        Newton iteration when it has no previous one.
+        Newton iteration when it has no previous one. Both come from scipy's solver (the
+        single-episode controller computes its fallback gain with the compiled one; they
+        agree to ~1e-13 relative), so that a batch compiles no scalar solver for them.
     """
 
     config: np.ndarray
@@ -333,7 +337,8 @@ def _cold(L: LaneSet, params: LaneParams) -> None:
     """The lanes :func:`_check` flagged after the long pass. A converged lane whose closed
     loop the squarings could not prove stable is decided by its eigenvalues (as the scalar
     solver decides its undecided closed loops); any other (the iteration from the doubling
-    failed too, which the tests have not met) takes the scalar solver
+    failed too: none in the figure-8 batches, some while a person stops and sets off) takes
+    the scalar solver
     (:func:`companion.fastlqr.stabilising_gain`: doubling, Newton polish and stability test);
     a lane without a stabilising gain gets :func:`_no_gain`."""
     if not L.need_cold.any():
@@ -394,6 +399,8 @@ def _solve_on(L: LaneSet, lanes: np.ndarray, steps: int) -> None:
     corr = np.empty((1, lanes.size))
     proved = np.zeros((1, lanes.size), np.bool_)
     active = np.ones(lanes.size, np.bool_)
+    # past and history are in the set's layout, not the gathered one: unused without
+    # extrapolation (the lanes were extrapolated in their first pass).
     solve_lanes(a, b, qd, rd, p, L.past, L.history, False, quad, active, steps, corr, proved,
                 k)
     L.p[blk, ..., j] = np.moveaxis(p[0], -1, 0)

@@ -218,18 +218,18 @@ def run_fast_batch(specs: Sequence, tol: Tolerance = Tolerance(), threads: int |
         groups.setdefault((steps, dt), []).append(i)
     tolerance = np.array([tol.rho, tol.alpha, tol.beta])
     helper, helpers = None, []
-    if not solve_lanes.signatures and any(s.controller in LQR_FAMILY for s in specs):
-        # First LQR batch of this process: if the lanes' Riccati solver is not in the cache
-        # yet, a helper process compiles it while this one compiles the other kernels, and
-        # a second one compiles the doubling that restarts lanes whose iteration failed (most
-        # batches need it for a few lanes in their first periods; all three share the two
-        # cores).
-        helper = _jitcache.compile_in_helper(SOLVE_LANES_KERNELS, "companion.fastlqr",
-                                             "compile_solve_lanes")
-        if helper is not None and not sda_nb.signatures:
-            helpers.append(_jitcache.compile_in_helper(SDA_KERNELS, "companion.fastlqr",
-                                                       "compile_sda", nice=10))
     try:
+        if not solve_lanes.signatures and any(s.controller in LQR_FAMILY for s in specs):
+            # First LQR batch of this process: if the lanes' Riccati solver is not in the
+            # cache yet, a helper process compiles it while this one compiles the other
+            # kernels, and a second one, at a lower priority, the doubling that restarts
+            # lanes whose iteration failed (most batches need it for a few lanes in their
+            # first periods).
+            helper = _jitcache.compile_in_helper(SOLVE_LANES_KERNELS, "companion.fastlqr",
+                                                 "compile_solve_lanes")
+            if helper is not None and not sda_nb.signatures:
+                helpers.append(_jitcache.compile_in_helper(SDA_KERNELS, "companion.fastlqr",
+                                                           "compile_sda", nice=10))
         for (steps, dt), members in groups.items():
             for c0 in range(0, len(members), CHUNK):
                 chunk = members[c0:c0 + CHUNK]
