@@ -1149,9 +1149,9 @@ def _warm_start_lane(p, past, history, lane, j):
     The prediction is the polynomial extrapolation of order 0 (``P(t-1)``), 1
     (``2 P(t-1) - P(t-2)``) or 2 (``3 P(t-1) - 3 P(t-2) + P(t-3)``) that would have predicted
     ``P(t-1)`` best from the periods before (order 0 with fewer than two periods, order 1
-    after two, as nothing can be compared yet). On smooth motion that is order 2 (first Newton correction ~1e-6 of P
-    instead of ~3e-5 with order 1 on the figure-8); with sensor noise, order 0 (the
-    extrapolations amplify the noise)."""
+    after two, as nothing can be compared yet). On smooth motion that is order 2 (first
+    Newton correction ~1e-6 of P instead of ~3e-5 with order 1 on the figure-8); with sensor
+    noise, order 0 (the extrapolations amplify the noise)."""
     h = history[lane]
     order = 0
     if h == 2:
@@ -1187,10 +1187,10 @@ def solve_lanes(a, b, qd, rd, p, past, history, extrapolate, quad, active, steps
     ``p`` (first replaced by :func:`_warm_start_lane`'s prediction if ``extrapolate``; the
     quadratic-convergence ratios then decay, see below). ``corr`` of an active lane ends 0
     where it converged, ``LANES_UNFINISHED`` where it was still iterating after ``steps`` and
-    inf where a step failed (the lane's ``p`` is then its last successful iterate); ``proved`` True where its last step's squarings proved its
-    closed loop stable; ``k`` (blocks, 2, 5, L) each lane's gain from its ``p``
-    (:func:`_gain_lanes`) in the blocks with an active lane. Blocks without an active lane are
-    skipped.
+    inf where a step failed (the lane's ``p`` is then its last successful iterate);
+    ``proved`` True where its last step's squarings proved its closed loop stable; ``k``
+    (blocks, 2, 5, L) each lane's gain from its ``p`` (:func:`_gain_lanes`) in the blocks with
+    an active lane. Blocks without an active lane are skipped.
 
     A lane has converged after a step whose relative correction ``c`` is at most
     ``LANES_DONE``, or when the next correction, predicted by the quadratic convergence of

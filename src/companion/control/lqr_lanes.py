@@ -10,8 +10,8 @@ gathered into one block, :func:`_solve_on`; and the gains), a stability check
 (:func:`_check`), a restart from the doubling for lanes whose iteration failed
 (:func:`_sda_start`, then the gathered pass), the eigenvalues for converged lanes the check
 could not prove stable and the scalar solver for lanes that fail after the restart
-(:func:`_cold`), and the output (:func:`_control`). :class:`LaneParams` holds the per-row parameters,
-:class:`LaneSet` the arrays; :func:`step_lanes` runs one period.
+(:func:`_cold`), and the output (:func:`_control`). :class:`LaneParams` holds the per-row
+parameters, :class:`LaneSet` the arrays; :func:`step_lanes` runs one period.
 
 The batch simulator (:mod:`companion.sim.fast_batch`) runs sets of many lanes. A lane's result
 does not depend on the other lanes of its set (a set of one gives the same bits). The gain

@@ -217,7 +217,7 @@ def run_fast_batch(specs: Sequence, tol: Tolerance = Tolerance(), threads: int |
                               f"({dt:g} s), got {spec.duration:g} s")
         groups.setdefault((steps, dt), []).append(i)
     tolerance = np.array([tol.rho, tol.alpha, tol.beta])
-    helper, helpers = None, []
+    helper = sda_helper = None
     try:
         if not solve_lanes.signatures and any(s.controller in LQR_FAMILY for s in specs):
             # First LQR batch of this process: if the lanes' Riccati solver is not in the
@@ -228,29 +228,28 @@ def run_fast_batch(specs: Sequence, tol: Tolerance = Tolerance(), threads: int |
             helper = _jitcache.compile_in_helper(SOLVE_LANES_KERNELS, "companion.fastlqr",
                                                  "compile_solve_lanes")
             if helper is not None and not sda_nb.signatures:
-                helpers.append(_jitcache.compile_in_helper(SDA_KERNELS, "companion.fastlqr",
-                                                           "compile_sda", nice=10))
+                sda_helper = _jitcache.compile_in_helper(SDA_KERNELS, "companion.fastlqr",
+                                                         "compile_sda", nice=10)
         for (steps, dt), members in groups.items():
             for c0 in range(0, len(members), CHUNK):
                 chunk = members[c0:c0 + CHUNK]
                 rows = _run_chunk([specs[i] for i in chunk], steps, dt, tolerance, threads,
-                                  helper, helpers)
+                                  helper, sda_helper)
                 helper = None
                 for i, row in zip(chunk, rows):
                     out[i] = _metrics(row, steps, dt)
-        for started in helpers:    # let the doubling reach the cache for later batches
-            _jitcache.wait_helper(started)
+        _jitcache.wait_helper(sda_helper)   # let the doubling reach the cache for later batches
     finally:
-        for started in [helper] + helpers:
-            _jitcache.stop_helper(started)
+        _jitcache.stop_helper(helper)
+        _jitcache.stop_helper(sda_helper)
     return out  # type: ignore[return-value]
 
 
 def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads: int,
-               helper=None, helpers: list | None = None) -> np.ndarray:
+               helper=None, sda_helper=None) -> np.ndarray:
     """Metric accumulators of ``specs`` (one chunk of one length). ``helper`` compiles the
-    lanes' solver (waited for before the first period); ``helpers[0]``, if any, the
-    doubling of the lanes' restarts (waited for at the first restart)."""
+    lanes' solver (waited for before the first period), ``sda_helper`` the doubling of the
+    lanes' restarts (waited for at the first restart); either may be None."""
     n = len(specs)
     persons: dict[object, int] = {}
     tables = []
@@ -319,8 +318,8 @@ def _run_chunk(specs: Sequence, steps: int, dt: float, tol: np.ndarray, threads:
         _account(0, dt, none, person, pidx, geo, np.empty((0, 2)), np.empty((0, 3)), tol, acc)
     _jitcache.wait_helper(helper)
     for lanes, _ in tasks:
-        if helpers and isinstance(lanes, LaneSet):
-            lanes.sda_helper = helpers[0]
+        if isinstance(lanes, LaneSet):
+            lanes.sda_helper = sda_helper
     if len(tasks) == 1:
         _drive(*tasks[0], steps, dt, shared)
     else:
