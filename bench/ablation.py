@@ -15,11 +15,9 @@ import math
 from threadpoolctl import threadpool_limits
 
 from companion import metrics
-from companion.control import make_controller
 from companion.params import Params
 from companion.sim import convergence
-from companion.sim.person import line
-from companion.sim.episode import run_episode
+from companion.sim.runner import EpisodeSpec, run_many
 from companion.sim.scenario import load_scenario
 
 INF = (math.inf, math.inf, math.inf)
@@ -38,34 +36,28 @@ VARIANTS = {
 
 def with_lqr(params: Params, clearance: float | None = None, **lqr) -> Params:
     """``params`` with LQR fields replaced and, if given, the barrier's person_clearance."""
-    safety = params.safety if clearance is None else dataclasses.replace(
-        params.safety, person_clearance=clearance)
+    keepout = params.keepout if clearance is None else dataclasses.replace(
+        params.keepout, person_clearance=clearance)
     return dataclasses.replace(params, lqr=dataclasses.replace(params.lqr, **lqr),
-                               safety=safety)
+                               keepout=keepout)
 
 
 def fig3(lqr: dict) -> tuple[int, float, float]:
+    specs = [convergence.episode(case, "lqr", with_lqr(Params(), **lqr))
+             for case in convergence.cases()]
     ok, worst, closest = 0, 0.0, math.inf
-    for case in convergence.cases():
-        bearing = math.pi / 2 if case.side == "left" else 1.5 * math.pi
-        p = with_lqr(Params(), **lqr)
-        p = dataclasses.replace(p, formation=dataclasses.replace(p.formation, bearing=bearing))
-        log = run_episode(make_controller("lqr", p), line(convergence.PERSON_START,
-                                                             case.speed), p, 30.0,
-                          start=case.start)
-        m = metrics.compute(log)
+    for m in run_many(specs, summarize=metrics.compute):
         s = m["settling_time_s"]
         closest = min(closest, m["min_person_distance_m"])
-        good = s is not None and s <= 20.0 and m["min_person_distance_m"] >= 0.5
-        ok += good
+        ok += s is not None and s <= 20.0 and m["min_person_distance_m"] >= 0.5
         worst = max(worst, s if s is not None else math.inf)
     return ok, worst, closest
 
 
 def scenario(name: str, lqr: dict) -> dict:
     sc = load_scenario(name)
-    p = with_lqr(sc.params, **lqr)
-    return metrics.compute(run_episode(make_controller("lqr", p), sc.person, p, sc.duration))
+    spec = EpisodeSpec("lqr", sc.person, with_lqr(sc.params, **lqr), sc.duration)
+    return metrics.compute(run_many([spec])[0])
 
 
 def main() -> None:

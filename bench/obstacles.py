@@ -12,28 +12,22 @@ from __future__ import annotations
 from threadpoolctl import threadpool_limits
 
 from companion import metrics
-from companion.control import make_controller
-from companion.sim.episode import run_episode
+from companion.sim.runner import run_many
 from companion.sim.scenario import load_scenario
-from companion.sim.sensing import make_perception
 
 
 def main() -> None:
+    runs = [(name, source, ctl) for name in ("fig4", "fig7", "corridor")
+            for source in ("truth", "lidar") for ctl in ("lqr", "lqr-paper")]
+    results = run_many([load_scenario(name).episode(ctl, source) for name, source, ctl in runs],
+                       summarize=metrics.compute)
     print(f"{'scenario':9s} {'obstacles':9s} {'controller':10s} {'collisions':>10s} "
           f"{'clearance':>9s} {'person':>7s} {'rmse rho':>9s} {'rmse alpha':>10s}")
-    for name in ("fig4", "fig7", "corridor"):
-        sc = load_scenario(name)
-        for source in ("truth", "lidar"):
-            for ctl in ("lqr", "lqr-paper"):
-                log = run_episode(make_controller(ctl, sc.params), sc.person, sc.params,
-                                  sc.duration, start=sc.start, seed=sc.seed,
-                                  obstacles=sc.obstacles,
-                                  perception=make_perception(source, sc.params))
-                m = metrics.compute(log)
-                print(f"{name:9s} {source:9s} {ctl:10s} {m['obstacle_collisions']:>10d} "
-                      f"{m['min_obstacle_clearance_m']:>8.3f}m "
-                      f"{m['min_person_distance_m']:>6.2f}m {m['rmse_rho_m'] * 100:>7.1f}cm "
-                      f"{m['rmse_alpha_rad']:>10.3f}", flush=True)
+    for (name, source, ctl), m in zip(runs, results):
+        print(f"{name:9s} {source:9s} {ctl:10s} {m['obstacle_collisions']:>10d} "
+              f"{m['min_obstacle_clearance_m']:>8.3f}m "
+              f"{m['min_person_distance_m']:>6.2f}m {m['rmse_rho_m'] * 100:>7.1f}cm "
+              f"{m['rmse_alpha_rad']:>10.3f}")
 
 
 if __name__ == "__main__":

@@ -4,7 +4,7 @@ key, and nothing written; output files are written whole or not at all."""
 import pytest
 
 from companion import io
-from companion.cli import main
+from companion.apps.cli import main
 
 GOOD_CSV = ["t,x,y", "0.0,0,0", "0.4,0.4,0", "0.8,0.8,0", "1.2,1.2,0", "1.6,1.6,0",
             "2.0,2.0,0"]

@@ -1,11 +1,11 @@
+import csv
 import json
 import math
-import csv
 
 import pytest
 
-from companion.cli import main
-from companion.sim.episode import LOG_COLUMNS
+from companion.apps.cli import main
+from companion.types import LOG_COLUMNS
 
 METRIC_KEYS = {"rmse_rho_m", "rmse_alpha_rad", "rmse_beta_rad", "rmsv_v_mps",
                "rmsv_omega_radps", "min_person_distance_m", "settling_time_s",
@@ -113,7 +113,8 @@ def test_bad_usage_exits_2_with_one_line(argv, message, capsys, tmp_path):
 
 
 @pytest.mark.parametrize("text, message", [
-    ('name = "x"\n[person]\nkind = "line"\nspeed = -1\n', "person.speed: expected a finite positive"),
+    ('name = "x"\n[person]\nkind = "line"\nspeed = -1\n',
+     "person.speed: expected a finite positive"),
     ('[person]\nkind = "lin"\n', "person.kind: expected one of"),
     ('[person]\nkind = "line"\nspede = 1\n', "person.spede: unknown key; did you mean 'speed'"),
     ('duraton = 3\n[person]\nkind = "line"\n', "duraton: unknown key; did you mean 'duration'"),
@@ -122,11 +123,16 @@ def test_bad_usage_exits_2_with_one_line(argv, message, capsys, tmp_path):
     ('[person]\nkind = "csv"\npath = "missing.csv"\n', "missing.csv: cannot read file"),
     ('[person\nkind = "line"\n', "invalid TOML"),
     ('duration = 3\n', "person: missing table"),
-    ('[person]\nkind = "line"\n[[obstacles]]\nkind = "box"\n', "obstacles[0].kind: expected 'circle' or 'wall'"),
-    ('[person]\nkind = "line"\n[[obstacles]]\nkind = "circle"\nradius = -1\n', "obstacles[0].radius: expected a finite positive"),
-    ('[person]\nkind = "line"\n[[obstacles]]\nkind = "circle"\nradus = 1\n', "obstacles[0].radus: unknown key; did you mean 'radius'"),
-    ('[person]\nkind = "line"\n[[obstacles]]\nkind = "wall"\nstart = [1, 1]\nend = [1, 1]\n', "obstacles[0]: expected a wall of positive length"),
-    ('obstacle_source = "radar"\n[person]\nkind = "line"\n', "obstacle_source: expected 'truth' or 'lidar'"),
+    ('[person]\nkind = "line"\n[[obstacles]]\nkind = "box"\n',
+     "obstacles[0].kind: expected 'circle' or 'wall'"),
+    ('[person]\nkind = "line"\n[[obstacles]]\nkind = "circle"\nradius = -1\n',
+     "obstacles[0].radius: expected a finite positive"),
+    ('[person]\nkind = "line"\n[[obstacles]]\nkind = "circle"\nradus = 1\n',
+     "obstacles[0].radus: unknown key; did you mean 'radius'"),
+    ('[person]\nkind = "line"\n[[obstacles]]\nkind = "wall"\nstart = [1, 1]\nend = [1, 1]\n',
+     "obstacles[0]: expected a wall of positive length"),
+    ('obstacle_source = "radar"\n[person]\nkind = "line"\n',
+     "obstacle_source: expected 'truth' or 'lidar'"),
 ])
 def test_bad_scenario_file(tmp_path, capsys, text, message):
     f = tmp_path / "bad.toml"
@@ -170,7 +176,8 @@ def test_readme_test_command_is_what_ci_runs():
     root = Path(__file__).resolve().parents[1]
     readme = (root / "README.md").read_text()
     ci = (root / ".ci" / "run").read_text()
-    test_cmd = [l for l in readme.splitlines() if "pytest" in l and l.startswith("python3")]
+    test_cmd = [line for line in readme.splitlines()
+                if "pytest" in line and line.startswith("python3")]
     assert len(test_cmd) == 1
     assert test_cmd[0] in ci.splitlines()
 
@@ -188,19 +195,22 @@ def test_convergence_command(tmp_path, capsys):
 def test_bench_json_has_the_documented_keys(tmp_path, capsys):
     out = tmp_path / "bench.json"
     code, text, _ = run(["bench", "--json", "--episodes", "3", "--duration", "1",
-                         "--workers", "1", "--no-compile-time", "--out", str(out)], capsys)
+                         "--workers", "2", "--no-first-step", "--out", str(out)], capsys)
     assert code == 0
     result = json.loads(text)
     assert json.loads(out.read_text()) == result
-    assert set(result["step_us"]) == {"lqr", "lqr-paper", "lqr-tuned", "pid", "vsm", "ic"}
-    for figures in list(result["step_us"].values()) + [result["scipy_step_us"]]:
-        assert 0.0 < figures["median"] <= figures["p99"]
+    assert set(result["step_us"]) == {"lqr", "lqr-paper", "lqr-tuned", "pid", "vsm", "ic",
+                                      "lqr with scipy"}
+    for name, figures in result["step_us"].items():
+        for where in ("alone", "stack") if name != "lqr with scipy" else ("alone",):
+            assert 0.0 < figures[where]["median"] <= figures[where]["p99"]
     # scipy's Riccati solver is much slower than the compiled one, even on a busy machine
-    assert result["speedup_vs_scipy"] > 5.0
-    assert result["batch"]["episodes"] == 3 and result["batch"]["all_finite"]
-    assert result["batch_steps_per_s"] > 0.0 and result["batch_noisy_steps_per_s"] > 0.0
-    assert set(result["batch_steps_per_s_by_controller"]) == {"lqr", "pid", "vsm", "ic"}
-    assert result["stack_batch_steps_per_s"] > 0.0 and result["peak_rss_mb"] > 10.0
+    assert (result["step_us"]["lqr with scipy"]["alone"]["median"]
+            > 5.0 * result["step_us"]["lqr"]["alone"]["median"])
+    tp = result["throughput"]
+    assert tp["episodes"] == 3 and tp["workers"] == 2
+    assert tp["steps_per_s_one_worker"] > 0.0 and tp["steps_per_s_all_workers"] > 0.0
+    assert result["peak_rss_mb"] > 10.0 and result["episode_steps"] == 20
 
 
 @pytest.mark.parametrize("argv, message", [

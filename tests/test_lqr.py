@@ -6,10 +6,8 @@ closed form of K from P and the optimality of u = -K x, rather than stored numbe
 
 from __future__ import annotations
 
-
 # Small matrices: OpenBLAS threading only adds overhead, and on a loaded machine it makes
 # expm / solve_discrete_are ~100x slower. Effective only if numpy is not imported yet.
-
 import dataclasses
 import math
 
@@ -18,11 +16,12 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from companion.control import LqrController, Observation, PersonState, Pose, paper_lqr
-from companion.kinematics import TWO_PI, unicycle_step
-from companion.lqr import augment, dlqr, riccati_residual
-from companion.model import LEFT, discretize, jacobians, slot_reference
-from companion.params import Formation, Params
+from companion.control import LqrController, paper_lqr
+from companion.geometry import TWO_PI, unicycle_step
+from companion.model import discretize, jacobians, slot_reference
+from companion.params import LEFT, Formation, Params
+from companion.riccati import augment, dlqr, riccati_residual
+from companion.types import Observation, PersonState, Pose
 
 SETTINGS = settings(max_examples=120, deadline=None)
 

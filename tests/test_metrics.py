@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from companion import metrics
-from companion.sim.episode import LOG_COLUMNS, Log
+from companion.types import LOG_COLUMNS, Log
 
 
 def make_log(rho_e, alpha_e=None, beta=None, dt=0.05):

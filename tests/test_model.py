@@ -7,10 +7,8 @@ an exact equilibrium, and the discretisations against closed forms.
 
 from __future__ import annotations
 
-
 # Small matrices: OpenBLAS threading only adds overhead, and on a loaded machine it makes
 # expm / solve_discrete_are ~100x slower. Effective only if numpy is not imported yet.
-
 import math
 
 import numpy as np
@@ -20,9 +18,16 @@ from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
-from companion.kinematics import TWO_PI, offset_point, unicycle_step, wrap_pi
-from companion.model import (BEHIND, FRONT, LEFT, RIGHT, discretize, dynamics, jacobians,
-                             relative_state, robot_pose_at, slot_reference)
+from companion.geometry import TWO_PI, offset_point, unicycle_step, wrap_pi
+from companion.model import (
+    discretize,
+    dynamics,
+    jacobians,
+    relative_state,
+    robot_pose_at,
+    slot_reference,
+)
+from companion.params import BEHIND, FRONT, LEFT, RIGHT
 
 SETTINGS = settings(max_examples=150, deadline=None)
 
@@ -221,7 +226,8 @@ def test_faster_robot_on_left_moves_ahead():
 
 def _slot_speed(v_h, omega_h, rho_d, alpha_d):
     """|V| of the desired reference point (person frame)."""
-    return math.hypot(v_h - rho_d * omega_h * math.sin(alpha_d), rho_d * omega_h * math.cos(alpha_d))
+    return math.hypot(v_h - rho_d * omega_h * math.sin(alpha_d),
+                      rho_d * omega_h * math.cos(alpha_d))
 
 
 @SETTINGS

@@ -1,11 +1,11 @@
 import math
+from pathlib import Path
 
 import pytest
 
 from companion.config import field_docs
 from companion.errors import ConfigError
 from companion.params import Params, load_params, params_from_mapping
-from pathlib import Path
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "parameters.md"
 
@@ -42,7 +42,8 @@ def test_load_from_toml(tmp_path):
     ("dt = nan", r"dt: expected a number, got nan"),
     ("[lqr]\nq = [1, 2, 3]", r"lqr\.q: expected 5 values, got 3"),
     ("[lqr]\nr = [1, -2]", r"lqr\.r: expected all entries finite and positive"),
-    ("[lqr]\nlinearize_at = 'measure'", r"lqr\.linearize_at: expected one of .*did you mean 'measured'"),
+    ("[lqr]\nlinearize_at = 'measure'",
+     r"lqr\.linearize_at: expected one of .*did you mean 'measured'"),
     ("[formation]\nbearing = 7.0", r"formation\.bearing: expected an angle in \[0, 2\*pi\)"),
     ("[formation]\nbearing = 'up'", r"formation\.bearing: expected a bearing in rad or one of"),
     ("robot = 3", r"robot: expected a table"),
@@ -68,7 +69,7 @@ def test_error_clip_accepts_inf():
 
 def test_every_parameter_is_documented():
     text = DOCS.read_text()
-    for key, unit, default, meaning in field_docs(Params):
+    for key, *_ in field_docs(Params):
         assert f"`{key}`" in text, f"{key} missing from docs/parameters.md"
 
 
@@ -77,22 +78,22 @@ def test_slot_inside_the_keep_out_is_rejected(tmp_path, bearing, distance):
     f = tmp_path / "p.toml"
     f.write_text(f'[formation]\nbearing = "{bearing}"\ndistance = {distance}\n')
     with pytest.raises(ConfigError, match="formation.distance: the slot .* inside "
-                                          "safety.person_clearance"):
+                                          "keepout.person_clearance"):
         load_params(f)
     f.write_text(f'[formation]\nbearing = "{bearing}"\ndistance = {distance}\n'
-                 '[safety]\nperson_clearance = 0.2\n[supervisor]\nprotective_distance = 0.2\n')
+                 '[keepout]\nperson_clearance = 0.2\nprotective_distance = 0.2\n')
     assert load_params(f).formation.distance == distance
 
 
 def test_slot_inside_the_protective_distance_is_rejected(tmp_path):
     f = tmp_path / "p.toml"
     f.write_text('[formation]\nbearing = "front"\ndistance = 0.7\n'
-                 '[safety]\nperson_clearance = 0.2\n')
+                 '[keepout]\nperson_clearance = 0.2\n')
     with pytest.raises(ConfigError, match="robot centre 0.45 m from the person, inside "
-                                          "supervisor.protective_distance"):
+                                          "keepout.protective_distance"):
         load_params(f)
     f.write_text('[formation]\nbearing = "front"\ndistance = 0.7\n'
-                 '[safety]\nperson_clearance = 0.2\n[supervisor]\nprotective_distance = 0.4\n')
+                 '[keepout]\nperson_clearance = 0.2\nprotective_distance = 0.4\n')
     assert load_params(f).formation.distance == 0.7
 
 

@@ -5,11 +5,12 @@ import numpy as np
 import pytest
 
 from companion.config import build, field_docs
-from companion.control.base import Pose
 from companion.errors import ConfigError
-from companion.obstacles import Circle, Wall, surface_distance
-from companion.perception import ExtractorParams, extract_obstacles
-from companion.sim.lidar import LidarParams, Scan, cast, scan_points
+from companion.geometry import clearance
+from companion.params import ExtractorParams, LidarParams
+from companion.perception import extract_obstacles
+from companion.sim.lidar import cast, scan_points
+from companion.types import Circle, Pose, Scan, Wall
 
 EXACT = LidarParams(noise_std=0.0)
 PARAMS = ExtractorParams()
@@ -31,7 +32,7 @@ def assert_all_points_covered(scan, circles, exclude=None, tol=1e-9):
 def assert_no_phantoms(circles, objects, tol=0.3):
     """Every reported circle comes within ``tol`` of a real object."""
     for c in circles:
-        assert min(surface_distance(o, c.x, c.y) for o in objects) - c.radius <= tol, c
+        assert min(clearance(o, c.x, c.y) for o in objects) - c.radius <= tol, c
 
 
 def assert_faces_pillars(scan, circles, pillars, tol=0.05):
@@ -41,7 +42,7 @@ def assert_faces_pillars(scan, circles, pillars, tol=0.05):
         ux, uy = c.x - scan.x, c.y - scan.y
         d = math.hypot(ux, uy)
         face = (c.x - c.radius * ux / d, c.y - c.radius * uy / d)
-        assert abs(surface_distance(p, *face)) <= tol, (p, c)
+        assert abs(clearance(p, *face)) <= tol, (p, c)
 
 
 def nearest(circles, x, y):
@@ -87,7 +88,7 @@ def _wall_points_between_returns(scan, wall, step=0.01):
     ex, ey = wall.x1 - wall.x0, wall.y1 - wall.y0
     length2 = ex * ex + ey * ey
     s = ((pts[:, 0] - wall.x0) * ex + (pts[:, 1] - wall.y0) * ey) / length2
-    on = np.array([surface_distance(wall, x, y) < 1e-6 for x, y in pts])
+    on = np.array([clearance(wall, x, y) < 1e-6 for x, y in pts])
     s0, s1 = s[on].min(), s[on].max()
     ss = np.linspace(s0, s1, max(2, int((s1 - s0) * math.sqrt(length2) / step)))
     return np.column_stack((wall.x0 + ss * ex, wall.y0 + ss * ey))
@@ -149,7 +150,7 @@ def test_noisy_scans(seed, noise):
     for p in pillars:                              # every true obstacle detected
         assert any(math.hypot(c.x - p.x, c.y - p.y) < p.radius + 0.3 for c in found), p
     for w in walls:
-        assert any(surface_distance(w, c.x, c.y) < c.radius for c in found), w
+        assert any(clearance(w, c.x, c.y) < c.radius for c in found), w
     assert_all_points_covered(scan, found, exclude=person)
     assert_no_phantoms(found, pillars + walls)
     assert_faces_pillars(scan, found, pillars, tol=0.1)
@@ -272,7 +273,7 @@ def test_all_cluster_points_covered_in_random_worlds():
         pillars = [Circle(*rng.uniform(-6, 6, 2), rng.uniform(0.05, 0.8)) for _ in range(5)]
         walls = [Wall(*rng.uniform(-7, 7, 4)) for _ in range(3)]
         objects = pillars + walls
-        if min(surface_distance(o, 0.0, 0.0) for o in objects) < 0.3:
+        if min(clearance(o, 0.0, 0.0) for o in objects) < 0.3:
             continue
         scan = cast(ORIGIN, pillars, walls, None, LidarParams(noise_std=0.02), rng)
         found = extract_obstacles(scan, None, PARAMS)

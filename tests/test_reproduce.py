@@ -5,9 +5,9 @@ import json
 
 import pytest
 
-from companion.cli import main
+from companion.apps.cli import main
+from companion.apps.reproduce import PAPER_TABLE2, TABLE2_COLUMNS, TRAJECTORIES
 from companion.control import CONTROLLERS
-from companion.reproduce import PAPER_TABLE2, TABLE2_COLUMNS, TRAJECTORIES
 
 
 @pytest.fixture(scope="module")
@@ -18,8 +18,8 @@ def out(tmp_path_factory):
 
 
 def test_files(out):
-    for name in ("table2.csv", "table2.md", "fig3.csv", "fig4.csv", "fig3_0.5mps.png", "fig3_1mps.png",
-                 "fig4a_trajectories.png", "fig4b_errors.png", "fig4c_inputs.png",
+    for name in ("table2.csv", "table2.md", "fig3.csv", "fig4.csv", "fig3_0.5mps.png",
+                 "fig3_1mps.png", "fig4a_trajectories.png", "fig4b_errors.png", "fig4c_inputs.png",
                  "fig4d_avoidance.png", "fig7a_trajectories.png", "fig7d_avoidance.png"):
         assert (out / name).stat().st_size > 0, name
     assert not list(out.glob(".*.tmp"))

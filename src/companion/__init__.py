@@ -1,7 +1,7 @@
 """companion: LQR side-by-side companion control for differential-drive robots."""
 
-from companion import _jitcache
+from companion import _jit
 
 __version__ = "0.1.0"
 
-_jitcache.install()
+_jit.install()

@@ -18,8 +18,9 @@ import math
 import tomllib
 import types
 import typing
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any, Callable, Mapping, TypeVar
+from typing import Any, TypeVar
 
 from companion.errors import ConfigError
 
@@ -193,7 +194,8 @@ def load_toml(path: str | Path) -> dict[str, Any]:
 
 
 def field_docs(cls: type, prefix: str = "") -> list[tuple[str, str, str, str]]:
-    """Rows ``(key, unit, default, meaning)`` for every field of ``cls``, nested tables flattened."""
+    """Rows ``(key, unit, default, meaning)`` for every field of ``cls``, nested tables
+    flattened."""
     rows = []
     for f in dataclasses.fields(cls):
         default = f.default if f.default is not dataclasses.MISSING else f.default_factory()

@@ -1,14 +1,32 @@
-"""Output files written whole or not at all: write to a temporary file, then rename."""
+"""Files in and out: input cells parsed with one-line errors, outputs written whole or not at
+all (to a temporary file, then renamed)."""
 
 from __future__ import annotations
 
 import csv
 import io
 import json
+import math
 import os
 import tempfile
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any
+
+from companion.errors import DataError
+
+
+def parse_number(where: str, col: str, cell: str) -> float:
+    """A finite float from a data-file cell, or a one-line DataError naming ``where`` (file
+    and line) and the column ``col``."""
+    text = cell.strip()
+    try:
+        value = float(text)
+    except ValueError:
+        raise DataError(f"{where}: column '{col}': expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise DataError(f"{where}: column '{col}': expected a finite number, got {text!r}")
+    return value
 
 
 def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:

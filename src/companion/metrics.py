@@ -3,7 +3,8 @@
 * RMSE (Eq. 21) of rho, alpha and beta against the nominal desired state (rho_d, alpha_d, 0),
   angle errors wrapped to (-pi, pi];
 * RMSV (Eq. 22) of v and omega against the person's (v_h, omega_h). In a turn the robot must
-  move at a different speed than the person (NOTES.md point 7), so RMSV > 0 there is geometry;
+  move at a different speed than the person (docs/model.md, reading notes), so RMSV > 0
+  there is geometry;
 * minimum distance from the robot centre (wheel axle) to the person;
 * settling time: the first time after which |rho_e| < tol_rho, |alpha_e| < tol_alpha and
   |beta - beta_ref| < tol_beta hold to the end of the run (None if they do not hold at the end).
@@ -21,12 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.sim.episode import Log
-
-
-def wrap(a: np.ndarray) -> np.ndarray:
-    """Wrap angles to [-pi, pi)."""
-    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
+from companion.geometry import wrap_pi_array
+from companion.types import Log
 
 
 @dataclass(frozen=True)
@@ -40,9 +37,9 @@ def errors(log: Log) -> dict[str, np.ndarray]:
     """Per-sample errors: rho_e, alpha_e, beta_e (vs 0) and beta_ref_e (vs beta_ref)."""
     return {
         "rho": log["rho"] - log["rho_d"],
-        "alpha": wrap(log["alpha"] - log["alpha_d"]),
-        "beta": wrap(log["beta"]),
-        "beta_ref": wrap(log["beta"] - log["beta_ref"]),
+        "alpha": wrap_pi_array(log["alpha"] - log["alpha_d"]),
+        "beta": wrap_pi_array(log["beta"]),
+        "beta_ref": wrap_pi_array(log["beta"] - log["beta_ref"]),
     }
 
 

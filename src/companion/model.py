@@ -1,43 +1,30 @@
 """Human-robot companion model (paper Sec. 2, Eq. 4-8).
 
-State ``chi = [rho, alpha, beta]``:
-
-* ``rho``: distance from the person to the robot's reference point R (Eq. 2);
-* ``alpha`` in [0, 2*pi): bearing of R seen from the person, measured from the person's
-  heading (left = pi/2, behind = pi, right = 3*pi/2, in front = 0);
-* ``beta`` in (-pi, pi]: heading difference ``theta_h - theta_r``.
-
-Input ``u = [v, omega]`` (robot), exogenous input ``w = [v_h, omega_h]`` (person).
-
-The dynamics are Eq. (7) with ``gamma = alpha + beta`` evaluated at the current state (see
-NOTES.md point 2 and docs/model.md). Jacobians are exact derivatives of those dynamics.
+State ``chi = [rho, alpha, beta]``: distance from the person to the robot's reference point R
+(Eq. 2), bearing of R seen from the person in [0, 2*pi) (left pi/2, behind pi, right 3*pi/2,
+front 0) and heading difference ``theta_h - theta_r`` in (-pi, pi]. Input ``u = [v, omega]``
+(robot), exogenous input ``w = [v_h, omega_h]`` (person). The dynamics are Eq. (7) with
+``gamma = alpha + beta`` at the current state, and the Jacobians are their exact derivatives
+(docs/model.md, sections 1-3).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from scipy.linalg import expm
 
-from companion.kinematics import offset_point, wrap_2pi, wrap_pi
-
-LEFT = 0.5 * math.pi
-BEHIND = math.pi
-RIGHT = 1.5 * math.pi
-FRONT = 0.0
-SIDES = {"left": LEFT, "right": RIGHT, "behind": BEHIND, "front": FRONT}
+from companion._jit import jitable
+from companion.geometry import offset_point, wrap_2pi, wrap_pi
 
 
+@jitable
 def relative_state(robot_x: float, robot_y: float, robot_theta: float,
                    person_x: float, person_y: float, person_theta: float,
                    d: float) -> tuple[float, float, float]:
-    """Measure ``chi = (rho, alpha, beta)`` from the robot and person poses (Eq. 4-6).
-
-    ``alpha`` uses ``atan2`` (NOTES.md point 1) and is wrapped to [0, 2*pi);
-    ``beta`` is wrapped to (-pi, pi].
-    """
+    """``chi = (rho, alpha, beta)`` from the robot and person poses (Eq. 4-6, with atan2)."""
     rx, ry = offset_point(robot_x, robot_y, robot_theta, d)
     dx, dy = rx - person_x, ry - person_y
     rho = math.hypot(dx, dy)
@@ -56,25 +43,12 @@ def robot_pose_at(rho: float, alpha: float, beta: float,
     return rx - d * math.cos(theta), ry - d * math.sin(theta), theta
 
 
-def dynamics(chi: np.ndarray, u: np.ndarray, w: np.ndarray, d: float) -> np.ndarray:
-    """Continuous-time companion dynamics ``chi_dot = f(chi, u, w)`` (Eq. 7, corrected).
-
-    Parameters
-    ----------
-    chi : array_like, shape (3,)
-        ``[rho, alpha, beta]``; rho must be positive.
-    u : array_like, shape (2,)
-        Robot input ``[v, omega]``.
-    w : array_like, shape (2,)
-        Person velocity ``[v_h, omega_h]``.
-    d : float
-        Offset of the reference point ahead of the axle (m).
-    """
+def dynamics(chi, u, w, d: float) -> np.ndarray:
+    """Continuous-time dynamics ``chi_dot = f(chi, u, w)`` (Eq. 7, corrected); rho > 0."""
     rho, alpha, beta = chi
     v, om = u
     vh, omh = w
-    g = alpha + beta
-    sg, cg = math.sin(g), math.cos(g)
+    sg, cg = math.sin(alpha + beta), math.cos(alpha + beta)
     return np.array([
         v * cg + d * om * sg - vh * math.cos(alpha),
         (vh * math.sin(alpha) - v * sg + d * om * cg) / rho - omh,
@@ -82,102 +56,104 @@ def dynamics(chi: np.ndarray, u: np.ndarray, w: np.ndarray, d: float) -> np.ndar
     ])
 
 
-def jacobians(chi: np.ndarray, u: np.ndarray, w: np.ndarray, d: float
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """Exact Jacobians ``(df/dchi, df/du)`` of :func:`dynamics`, shapes (3, 3) and (3, 2)."""
-    rho, alpha, beta = chi
-    v, om = u
-    vh, _ = w
+@jitable
+def jacobians(chi, u, w, d: float) -> tuple[np.ndarray, np.ndarray]:
+    """Exact Jacobians ``(df/dchi, df/du)`` of :func:`dynamics`, shapes (3, 3) and (3, 2).
+
+    ``chi``, ``u`` and ``w`` are sequences (tuples or arrays) of 3, 2 and 2 numbers.
+    """
+    rho, alpha, beta = chi[0], chi[1], chi[2]
+    v, om, vh = u[0], u[1], w[0]
     g = alpha + beta
     sg, cg = math.sin(g), math.cos(g)
-    sa, ca = math.sin(alpha), math.cos(alpha)
     dr_dg = -v * sg + d * om * cg          # d(rho_dot)/d(gamma)
-    num = vh * sa - v * sg + d * om * cg   # rho * (alpha_dot + omega_h)
+    num = vh * math.sin(alpha) - v * sg + d * om * cg   # rho * (alpha_dot + omega_h)
     dnum_dg = -v * cg - d * om * sg
-    jx = np.array([
-        [0.0, dr_dg + vh * sa, dr_dg],
-        [-num / (rho * rho), (vh * ca + dnum_dg) / rho, dnum_dg / rho],
-        [0.0, 0.0, 0.0],
-    ])
-    ju = np.array([
-        [cg, d * sg],
-        [-sg / rho, d * cg / rho],
-        [0.0, -1.0],
-    ])
+    jx = np.zeros((3, 3))
+    jx[0, 1] = dr_dg + vh * math.sin(alpha)
+    jx[0, 2] = dr_dg
+    jx[1, 0] = -num / (rho * rho)
+    jx[1, 1] = (vh * math.cos(alpha) + dnum_dg) / rho
+    jx[1, 2] = dnum_dg / rho
+    ju = np.zeros((3, 2))
+    ju[0, 0] = cg
+    ju[0, 1] = d * sg
+    ju[1, 0] = -sg / rho
+    ju[1, 1] = d * cg / rho
+    ju[2, 1] = -1.0
     return jx, ju
+
+
+@jitable
+def euler(jx: np.ndarray, ju: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Forward-Euler discretisation ``(I + dt jx, dt ju)`` (the paper's)."""
+    n, m = ju.shape
+    a = np.empty((n, n))
+    b = np.empty((n, m))
+    for i in range(n):
+        for j in range(n):
+            a[i, j] = dt * jx[i, j] + (1.0 if i == j else 0.0)
+        for j in range(m):
+            b[i, j] = dt * ju[i, j]
+    return a, b
+
+
+def zoh(jx: np.ndarray, ju: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Exact zero-order-hold discretisation, read off ``expm(dt [[jx, ju], [0, 0]])``."""
+    n, m = ju.shape
+    block = np.zeros((n + m, n + m))
+    block[:n, :n] = jx
+    block[:n, n:] = ju
+    e = expm(block * dt)
+    return e[:n, :n], e[:n, n:]
 
 
 def discretize(jx: np.ndarray, ju: np.ndarray, dt: float, method: str = "euler"
                ) -> tuple[np.ndarray, np.ndarray]:
-    """Discretise the linearisation ``dx/dt = jx x + ju u`` with sample time ``dt``.
-
-    ``method="euler"`` is the paper's forward Euler (``A = I + dt*jx``, ``B = dt*ju``);
-    ``method="zoh"`` is the exact zero-order-hold discretisation via the matrix exponential.
-    """
-    n, m = ju.shape
+    """Discretise ``dx/dt = jx x + ju u`` with sample time ``dt``: ``method`` is "euler"
+    (:func:`euler`) or "zoh" (:func:`zoh`)."""
     if method == "euler":
-        return np.eye(n) + dt * jx, dt * ju
+        return euler(np.asarray(jx, float), np.asarray(ju, float), dt)
     if method == "zoh":
-        block = np.zeros((n + m, n + m))
-        block[:n, :n] = jx
-        block[:n, n:] = ju
-        e = expm(block * dt)
-        return e[:n, :n], e[:n, n:]
+        return zoh(jx, ju, dt)
     raise ValueError(f"discretize: method must be 'euler' or 'zoh', got {method!r}")
 
 
-@dataclass(frozen=True)
-class SlotReference:
-    """Equilibrium of the companion model for a person moving with constant ``(v_h, omega_h)``.
-
-    Attributes
-    ----------
-    beta : float
-        Heading difference the robot must have to hold ``(rho_d, alpha_d)`` (rad).
-    v, omega : float
-        Robot input that holds the slot (m/s, rad/s).
-    feasible : bool
-        False when no equilibrium exists: the slot moves slower than ``d * |omega_h|``
-        (the person turns about a point near the slot). The values are then the closest
-        compromise (heading across the slot velocity, or at rest: beta = 0, v = 0).
-    """
+class SlotReference(NamedTuple):
+    """Equilibrium of the companion model for a person moving with constant ``(v_h, omega_h)``:
+    the heading difference ``beta`` and robot input ``(v, omega)`` that hold the slot.
+    ``feasible`` is False when no equilibrium exists (the slot moves slower than
+    ``d |omega_h|``); the values are then the closest compromise."""
 
     beta: float
     v: float
     omega: float
-    feasible: bool = True
+    feasible: bool
 
 
+@jitable
 def slot_reference(v_h: float, omega_h: float, rho_d: float, alpha_d: float, d: float
                    ) -> SlotReference:
-    """Geometry-consistent feedforward: the input and heading that hold the desired slot.
+    """Geometry-consistent feedforward: the input and heading that hold the desired slot
+    (docs/model.md, section 5).
 
-    The desired reference point ``R_d = h + rho_d * e(theta_h + alpha_d)`` moves with velocity
-    ``V = v_h e(theta_h) + rho_d omega_h e_perp(theta_h + alpha_d)``. The robot holds it when
-    its heading turns at ``omega_h`` and its reference point moves with ``V``:
-    ``v e(theta_r) + d omega_h e_perp(theta_r) = V``. Of the two headings that solve this
-    (forward or reverse driving), the one closer to the person's heading is taken.
-    This is an exact equilibrium of :func:`dynamics` (NOTES.md point 6) whenever one exists,
-    i.e. when ``|V| >= d |omega_h|``; otherwise ``feasible`` is False.
-
-    Everything is expressed in the person's frame, so the result does not depend on
-    ``theta_h``.
+    The slot ``R_d = h + rho_d e(theta_h + alpha_d)`` moves with ``V = v_h e(theta_h) +
+    rho_d omega_h e_perp(theta_h + alpha_d)``; the robot holds it when ``v e(theta_r) +
+    d omega_h e_perp(theta_r) = V``. Of the two headings that solve this (forward or reverse),
+    the one closer to the person's heading is taken. Computed in the person's frame.
     """
-    # V in the person's frame (x along the person's heading).
     vx = v_h - rho_d * omega_h * math.sin(alpha_d)
     vy = rho_d * omega_h * math.cos(alpha_d)
     speed = math.hypot(vx, vy)
     lateral = d * omega_h
     feasible = speed >= abs(lateral)
     if speed < 1e-9:
-        return SlotReference(beta=0.0, v=0.0, omega=omega_h, feasible=feasible)
+        return SlotReference(0.0, 0.0, omega_h, feasible)
     psi = math.atan2(vy, vx)
-    ratio = max(-1.0, min(1.0, lateral / speed))
-    delta = math.asin(ratio)
+    delta = math.asin(max(-1.0, min(1.0, lateral / speed)))
     along = math.sqrt(max(speed * speed - lateral * lateral, 0.0))
-    # Forward solution: theta_r = psi - delta, v = +along; reverse: theta_r = psi + pi + delta.
-    theta_fwd = psi - delta
-    theta_rev = psi + math.pi + delta
+    theta_fwd = psi - delta             # forward: theta_r = psi - delta, v = +along
+    theta_rev = psi + math.pi + delta   # reverse: theta_r = psi + pi + delta, v = -along
     if abs(wrap_pi(theta_fwd)) <= abs(wrap_pi(theta_rev)):
         return SlotReference(wrap_pi(-theta_fwd), along, omega_h, feasible)
     return SlotReference(wrap_pi(-theta_rev), -along, omega_h, feasible)

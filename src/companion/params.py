@@ -1,4 +1,4 @@
-"""All parameters of companion, with the paper's Table 1 values as defaults.
+"""Every parameter of companion, the paper's Table 1 values as defaults.
 
 One frozen, typed tree (:class:`Params`) validated in one place (:mod:`companion.config`).
 docs/parameters.md documents every field; a test keeps the two in step.
@@ -8,15 +8,31 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
-from companion.config import (Validated, all_non_negative, all_positive, all_positive_or_inf,
-                              build, load_toml, non_negative, param, positive, validate)
+from companion.config import (
+    Validated,
+    all_non_negative,
+    all_positive,
+    all_positive_or_inf,
+    build,
+    load_toml,
+    non_negative,
+    param,
+    positive,
+    validate,
+)
 from companion.errors import ConfigError
-from companion.model import SIDES
-from companion.perception import ExtractorParams
-from companion.sim.lidar import LidarParams
+
+LEFT = 0.5 * math.pi
+BEHIND = math.pi
+RIGHT = 1.5 * math.pi
+FRONT = 0.0
+#: Side names accepted for ``formation.bearing``.
+SIDES = {"left": LEFT, "right": RIGHT, "behind": BEHIND, "front": FRONT}
+TWO_PI = 2.0 * math.pi
 
 
 def _sample_period(x: float) -> str | None:
@@ -24,7 +40,31 @@ def _sample_period(x: float) -> str | None:
 
 
 def _bearing(x: float) -> str | None:
-    return None if 0.0 <= x < 2.0 * math.pi else "an angle in [0, 2*pi) rad"
+    return None if 0.0 <= x < TWO_PI else "an angle in [0, 2*pi) rad"
+
+
+def _fraction(x: float) -> str | None:
+    return None if 0.0 <= x <= 1.0 else "a fraction in [0, 1]"
+
+
+def _step_ratio(x: float) -> str | None:
+    return None if 1.0 < x < math.inf else "a finite ratio > 1"
+
+
+def _fov(x: float) -> str | None:
+    return None if 0.0 < x <= TWO_PI + 1e-9 else "an angle in (0, 2*pi] rad"
+
+
+def _resolution(x: float) -> str | None:
+    return None if 1e-4 <= x <= math.pi else "an angle in [0.0001, pi] rad"
+
+
+def _at_least_one(n: int) -> str | None:
+    return None if n >= 1 else "an integer >= 1"
+
+
+def _breakpoint_angle(x: float) -> str | None:
+    return None if 0.0 <= x < 0.5 * math.pi else "an angle in [0, pi/2) rad"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -45,7 +85,7 @@ class Formation(Validated):
     """Where the robot walks relative to the person."""
 
     distance: float = param(1.0, "m", "desired distance rho_d from the person to R", positive)
-    bearing: float = param(0.5 * math.pi, "rad",
+    bearing: float = param(LEFT, "rad",
                            "desired bearing alpha_d of R from the person's heading, in [0, 2*pi): "
                            "left pi/2, behind pi, right 3*pi/2, front 0. TOML also accepts "
                            "\"left\", \"right\", \"behind\", \"front\"", _bearing)
@@ -74,9 +114,9 @@ class LqrParams(Validated):
                                 "discretisation of the linearised model: 'euler' (paper) or "
                                 "'zoh' (exact zero-order hold)", choices=("euler", "zoh"))
     solver: str = param("compiled", "-",
-                        "Riccati solver of the per-step gain: 'compiled' (numba doubling + "
-                        "Newton, ~10 us; companion.fastlqr) or 'scipy' (solve_discrete_are, "
-                        "~0.6 ms; the reference). The gains agree to 1e-8 relative",
+                        "Riccati solver of the per-step gain: 'compiled' (doubling + Newton, "
+                        "numba; companion.riccati) or 'scipy' (solve_discrete_are, the "
+                        "reference); the gains agree to 1e-8 relative",
                         choices=("compiled", "scipy"))
     error_clip: tuple[float, float, float] = param(
         (1.0, 0.5 * math.pi, 0.5 * math.pi), "m, rad, rad",
@@ -87,29 +127,33 @@ class LqrParams(Validated):
 
 
 @dataclasses.dataclass(frozen=True)
-class SafetyParams(Validated):
-    """Keep-out barriers around the person and obstacles (ours; :mod:`companion.control.safety`)."""
+class KeepOutParams(Validated):
+    """Every rule that keeps the robot away from the person and the obstacles, applied by the
+    safety supervisor (:mod:`companion.control.keepout`, docs/safety.md)."""
 
-    person_clearance: float = param(0.6, "m", "distance from robot centre to person that the "
-                                    "barrier keeps; 0 switches the barrier off", non_negative)
-    obstacle_clearance: float = param(0.1, "m", "clearance from the robot's footprint to an "
-                                      "obstacle surface that the barrier keeps; 0 switches "
-                                      "it off", non_negative)
-    barrier_rate: float = param(2.0, "1/s", "rate of the barriers: the robot may approach at "
-                                "most at barrier_rate * (clearance - its minimum)", positive)
-
-
-def _fraction(x: float) -> str | None:
-    return None if 0.0 <= x <= 1.0 else "a fraction in [0, 1]"
-
-
-def _step_ratio(x: float) -> str | None:
-    return None if 1.0 < x < math.inf else "a finite ratio > 1"
+    person_clearance: float = param(0.6, "m", "comfort barrier: robot centre to person "
+                                    "distance that the speed barrier keeps; 0 switches the "
+                                    "barrier off", non_negative)
+    obstacle_clearance: float = param(0.1, "m", "comfort barrier: footprint to obstacle "
+                                      "surface clearance that the speed barrier keeps; 0 "
+                                      "switches it off", non_negative)
+    barrier_rate: float = param(2.0, "1/s", "rate of the comfort barriers: the robot may "
+                                "approach at most at barrier_rate * (clearance - its minimum)",
+                                positive)
+    protective_distance: float = param(0.5, "m", "robot centre to person distance inside which "
+                                       "the robot may only rotate or move away; outside it the "
+                                       "speed towards the person is limited so that braking at "
+                                       "the deceleration limit stops it here", positive)
+    person_accel: float = param(1.0, "m/s^2", "acceleration towards the robot a person may "
+                                "add; the braking bound towards the person plans with the "
+                                "robot's rate limit minus this", non_negative)
+    contact_margin: float = param(0.02, "m", "clearance short of contact at which the braking "
+                                  "bound towards obstacles stops the robot", non_negative)
 
 
 @dataclasses.dataclass(frozen=True)
 class SupervisorParams(Validated):
-    """Safety supervisor, the last layer before the motors (:mod:`companion.control.supervisor`,
+    """Safety supervisor: rate limits and fault handling (:mod:`companion.control.supervisor`,
     docs/safety.md). Acceleration defaults are those of Nav2's velocity smoother."""
 
     accel_max: float = param(2.5, "m/s^2", "limit on the rate at which |v| grows", positive)
@@ -124,21 +168,14 @@ class SupervisorParams(Validated):
                                     "accepted one than this speed allows (plus jump_tolerance) "
                                     "is an outlier (identity switch) and is rejected; a "
                                     "reported person speed above it is clipped to it", positive)
-    max_person_turn_rate: float = param(2.0 * math.pi, "rad/s", "a reported person turn rate "
-                                        "above this is clipped to it before the person is "
-                                        "predicted forward", positive)
+    max_person_turn_rate: float = param(TWO_PI, "rad/s", "a reported person turn rate above "
+                                        "this is clipped to it before the person is predicted "
+                                        "forward", positive)
     jump_tolerance: float = param(0.2, "m", "position noise allowed on top of max_person_speed "
                                   "in the outlier gate", non_negative)
     reacquire_time: float = param(0.3, "s", "after the person was lost, observations must be "
                                   "consistent with each other for this long before the robot "
                                   "follows again", non_negative)
-    protective_distance: float = param(0.5, "m", "robot centre to person distance inside which "
-                                       "the robot may only rotate or move away; outside it the "
-                                       "speed towards the person is limited so that braking at "
-                                       "decel_max stops it here", positive)
-    person_accel: float = param(1.0, "m/s^2", "acceleration towards the robot a person may "
-                                "add; the braking-distance bound towards the person plans with "
-                                "the robot's rate limit minus this", non_negative)
     max_step_ratio: float = param(3.0, "-", "a time step longer than max_step_ratio * dt (or "
                                   "zero, negative or not finite) is a clock fault: the "
                                   "controller's filters are reset", _step_ratio)
@@ -157,8 +194,8 @@ class AvoidanceParams(Validated):
     c2: float = param(0.9, "1/m", "decay of the acceleration with rho_ob (Table 1)",
                       non_negative)
     k_ob: float = param(0.375, "-", "K_ob = r_o / rho_o, obstacle radius over influence range; "
-                        "Table 1 prints 0.6 but both experiments imply 0.375 (NOTES.md 9)",
-                        positive)
+                        "Table 1 prints 0.6 but both experiments imply 0.375 (docs/model.md, "
+                        "reading notes)", positive)
     wall_influence: float = param(0.5, "m", "influence range rho_o of wall segments", positive)
     decay_time: float = param(0.5, "s", "time constant with which u_ob leaks back to 0 "
                               "(ours; the paper integrates without leak)", positive)
@@ -172,10 +209,71 @@ class AvoidanceParams(Validated):
 
 
 @dataclasses.dataclass(frozen=True)
+class LidarParams(Validated):
+    """A simulated 2D LiDAR at the robot's pose (:mod:`companion.sim.lidar`)."""
+
+    fov: float = param(TWO_PI, "rad", "field of view, centred on the robot's heading, in "
+                       "(0, 2*pi]; 2*pi is a full 360 degree scan", _fov)
+    range_max: float = param(10.0, "m", "maximum range; beams hitting nothing closer return "
+                             "inf", positive)
+    resolution: float = param(math.radians(0.5), "rad",
+                              "angular step between beams (0.5 deg: 720 beams per revolution); "
+                              "for a full circle it is rounded so that it divides 2*pi",
+                              _resolution)
+    rate: float = param(10.0, "Hz", "scans per second; the simulator scans every "
+                        "round(1 / (rate * dt)) control steps and holds the result in between",
+                        positive)
+    noise_std: float = param(0.01, "m", "standard deviation of the Gaussian noise added to "
+                             "every finite range (clipped at 0); 0 = exact", non_negative)
+    person_radius: float = param(0.2, "m", "radius of the circle that stands for the person's "
+                                 "body in the scan", positive)
+
+
+@dataclasses.dataclass(frozen=True)
+class ExtractorParams(Validated):
+    """Turning a LiDAR scan into circular obstacles (:mod:`companion.perception`)."""
+
+    cluster_gap: float = param(0.15, "m", "consecutive returns farther apart than this (and "
+                               "than the adaptive breakpoint distance) start a new cluster; so "
+                               "does a beam without return", positive)
+    breakpoint_angle: float = param(math.radians(10.0), "rad",
+                                    "adaptive breakpoint (Borges & Aldon 2004): returns on a "
+                                    "surface seen at least this angle away from grazing stay in "
+                                    "one cluster, i.e. the gap threshold grows to r * sin(step) "
+                                    "/ sin(breakpoint_angle - step) at range r; 0 = fixed "
+                                    "cluster_gap only", _breakpoint_angle)
+    min_points: int = param(3, "-", "clusters with fewer returns are dropped as noise",
+                            _at_least_one)
+    max_segment: float = param(0.6, "m", "a cluster that is not one circle (a wall, a corner) "
+                               "and is longer than this is split into pieces of at most this "
+                               "length, each reported as its own circle", positive)
+    person_exclusion: float = param(0.5, "m", "circles whose centre is within person_radius + "
+                                    "this of the tracked person are the person and are not "
+                                    "reported (absorbs tracking error)", non_negative)
+    person_radius: float = param(0.2, "m", "radius of the person's body; should match "
+                                 "lidar.person_radius", positive)
+    piece_influence: float = param(0.5, "m", "avoidance influence range given to circles that "
+                                   "stand for pieces of a wall or a large object (like "
+                                   "avoidance.wall_influence for known walls)", positive)
+    min_radius: float = param(0.05, "m", "smallest reported radius", positive)
+    max_radius: float = param(1.0, "m", "largest fitted radius; a circle is only enlarged "
+                              "beyond it to cover its cluster's returns", positive)
+    fit_tolerance: float = param(0.04, "m", "largest RMS radial residual of an accepted "
+                                 "circle fit; the returns must also bulge towards the sensor by "
+                                 "twice this from their chord (about 2-4 x the range noise)",
+                                 positive)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.min_radius > self.max_radius:
+            raise ConfigError(f"extractor.min_radius: expected at most max_radius "
+                              f"({self.max_radius:g} m), got {self.min_radius:g}")
+
+
+@dataclasses.dataclass(frozen=True)
 class PidParams(Validated):
-    """PID baseline (:mod:`companion.control.pid`, docs/baselines.md). Errors are those of the
-    reference point R against the slot S in the robot frame (e_x ahead, e_y left) and of the
-    heading against the slot-holding heading (e_theta)."""
+    """PID baseline (:mod:`companion.control.pid`, docs/baselines.md): errors of R against the
+    slot S in the robot frame (e_x ahead, e_y left) and of the heading (e_theta)."""
 
     kp_x: float = param(3.412, "1/s", "proportional gain of v on e_x", non_negative)
     ki_x: float = param(0.1497, "1/s^2", "integral gain of v on e_x", non_negative)
@@ -196,8 +294,8 @@ class PidParams(Validated):
 
 @dataclasses.dataclass(frozen=True)
 class VsmParams(Validated):
-    """Virtual spring model baseline (:mod:`companion.control.vsm`, docs/baselines.md): a
-    spring-damper between R and the slot S acting on a virtual mass at R."""
+    """Virtual spring model baseline (:mod:`companion.control.vsm`): a spring-damper between R
+    and the slot S acting on a virtual mass at R."""
 
     stiffness: float = param(8.326, "N/m", "spring constant k", positive)
     damping: float = param(1.948, "N s/m", "damper constant c", non_negative)
@@ -206,12 +304,11 @@ class VsmParams(Validated):
 
 @dataclasses.dataclass(frozen=True)
 class ImpedanceParams(Validated):
-    """Impedance control baseline (:mod:`companion.control.impedance`, docs/baselines.md):
-    ``M e_ddot + D e_dot + K e = 0`` on the slot error in the person frame, per axis
-    (longitudinal along the person's heading, lateral to its left)."""
+    """Impedance control baseline (:mod:`companion.control.impedance`): ``M e_ddot + D e_dot +
+    K e = 0`` per axis of the slot error in the person frame (longitudinal, lateral)."""
 
-    mass: tuple[float, float] = param((0.1437, 0.9623), "kg", "virtual mass M (longitudinal, lateral)",
-                                      all_positive)
+    mass: tuple[float, float] = param((0.1437, 0.9623), "kg",
+                                      "virtual mass M (longitudinal, lateral)", all_positive)
     damping: tuple[float, float] = param((0.2843, 7.237), "N s/m",
                                          "damping D (longitudinal, lateral)", all_non_negative)
     stiffness: tuple[float, float] = param((1.9, 18.99), "N/m",
@@ -227,7 +324,7 @@ class Params(Validated):
     robot: RobotParams = param(RobotParams(), "", "")
     formation: Formation = param(Formation(), "", "")
     lqr: LqrParams = param(LqrParams(), "", "")
-    safety: SafetyParams = param(SafetyParams(), "", "")
+    keepout: KeepOutParams = param(KeepOutParams(), "", "")
     supervisor: SupervisorParams = param(SupervisorParams(), "", "")
     avoidance: AvoidanceParams = param(AvoidanceParams(), "", "")
     lidar: LidarParams = param(LidarParams(), "", "")
@@ -238,21 +335,20 @@ class Params(Validated):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        f = self.formation
+        f, k = self.formation, self.keepout
         # robot centre (axle) in the slot, heading with the person: R - d e(theta_h)
-        cx = f.distance * math.cos(f.bearing) - self.robot.d
-        cy = f.distance * math.sin(f.bearing)
-        for name, keep in (("safety.person_clearance", self.safety.person_clearance),
-                           ("supervisor.protective_distance",
-                            self.supervisor.protective_distance)):
-            if math.hypot(cx, cy) < keep:
+        centre = math.hypot(f.distance * math.cos(f.bearing) - self.robot.d,
+                            f.distance * math.sin(f.bearing))
+        for name, keep in (("keepout.person_clearance", k.person_clearance),
+                           ("keepout.protective_distance", k.protective_distance)):
+            if centre < keep:
                 raise ConfigError(
                     f"formation.distance: the slot at {f.distance:g} m, bearing "
-                    f"{f.bearing:.3f} rad puts the robot centre {math.hypot(cx, cy):.2f} m from "
-                    f"the person, inside {name} ({keep:g} m); expected a larger distance or a "
-                    f"smaller {name.split('.')[1]}")
+                    f"{f.bearing:.3f} rad puts the robot centre {centre:.2f} m from the person, "
+                    f"inside {name} ({keep:g} m); expected a larger distance or a smaller "
+                    f"{name.split('.')[1]}")
 
-    def replace(self, **changes: Any) -> "Params":
+    def replace(self, **changes: Any) -> Params:
         """A copy with top-level fields replaced, validated."""
         out = dataclasses.replace(self, **changes)
         validate(out)

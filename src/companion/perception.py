@@ -46,86 +46,13 @@ person's, so a short stretch of the object next to the person can be missing.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
-from companion.config import Validated, non_negative, param, positive
-from companion.errors import ConfigError
-from companion.obstacles import Circle
-
-@dataclass(frozen=True, eq=False)
-class Scan:
-    """One LiDAR scan and the pose it was taken from.
-
-    Attributes
-    ----------
-    angles : ndarray, shape (n,)
-        Beam angles in rad, robot frame, increasing, centred on the heading.
-    ranges : ndarray, shape (n,)
-        Range per beam in m; ``inf`` = no return within range, NaN = invalid (fault injection).
-    x, y, theta : float
-        Sensor pose in the world frame (m, m, rad) when the scan was taken.
-    """
-
-    angles: np.ndarray
-    ranges: np.ndarray
-    x: float
-    y: float
-    theta: float
-
-
+from companion.params import ExtractorParams
+from companion.types import Circle, Scan
 
 _COVER_EPS = 1e-9  # m added to covering radii so that round-off never leaves a point outside
-
-
-def _at_least_one(n: int) -> str | None:
-    return None if n >= 1 else "an integer >= 1"
-
-
-def _breakpoint_angle(x: float) -> str | None:
-    return None if 0.0 <= x < 0.5 * math.pi else "an angle in [0, pi/2) rad"
-
-
-@dataclass(frozen=True)
-class ExtractorParams(Validated):
-    """Turning a LiDAR scan into circular obstacles (:mod:`companion.perception`)."""
-
-    cluster_gap: float = param(0.15, "m", "consecutive returns farther apart than this (and "
-                               "than the adaptive breakpoint distance) start a new cluster; so "
-                               "does a beam without return", positive)
-    breakpoint_angle: float = param(math.radians(10.0), "rad",
-                                    "adaptive breakpoint (Borges & Aldon 2004): returns on a "
-                                    "surface seen at least this angle away from grazing stay in "
-                                    "one cluster, i.e. the gap threshold grows to r * sin(step) "
-                                    "/ sin(breakpoint_angle - step) at range r; 0 = fixed "
-                                    "cluster_gap only", _breakpoint_angle)
-    min_points: int = param(3, "-", "clusters with fewer returns are dropped as noise",
-                            _at_least_one)
-    max_segment: float = param(0.6, "m", "a cluster that is not one circle (a wall, a corner) "
-                               "and is longer than this is split into pieces of at most this "
-                               "length, each reported as its own circle", positive)
-    person_exclusion: float = param(0.5, "m", "circles whose centre is within person_radius + "
-                                    "this of the tracked person are the person and are not "
-                                    "reported (absorbs tracking error)", non_negative)
-    person_radius: float = param(0.2, "m", "radius of the person's body; should match "
-                                 "lidar.person_radius", positive)
-    piece_influence: float = param(0.5, "m", "avoidance influence range given to circles that "
-                                   "stand for pieces of a wall or a large object (like "
-                                   "avoidance.wall_influence for known walls)", positive)
-    min_radius: float = param(0.05, "m", "smallest reported radius", positive)
-    max_radius: float = param(1.0, "m", "largest fitted radius; a circle is only enlarged "
-                              "beyond it to cover its cluster's returns", positive)
-    fit_tolerance: float = param(0.04, "m", "largest RMS radial residual of an accepted "
-                                 "circle fit; the returns must also bulge towards the sensor by "
-                                 "twice this from their chord (about 2-4 x the range noise)",
-                                 positive)
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if self.min_radius > self.max_radius:
-            raise ConfigError(f"extractor.min_radius: expected at most max_radius "
-                              f"({self.max_radius:g} m), got {self.min_radius:g}")
 
 
 def _clusters(scan: Scan, gap: float, breakpoint_angle: float

@@ -6,12 +6,13 @@ import numpy as np
 import pytest
 
 from companion import metrics
-from companion.control import Observation, PersonState, Pose, make_controller
+from companion.control import make_controller
 from companion.control.pid import PidController
 from companion.model import robot_pose_at, slot_reference
 from companion.params import Params
 from companion.sim.episode import run_episode
 from companion.sim.person import circle, line
+from companion.types import Observation, PersonState, Pose
 
 BASELINES = ("pid", "vsm", "ic")
 

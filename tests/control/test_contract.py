@@ -5,11 +5,12 @@ import math
 import numpy as np
 import pytest
 
-from companion.control import CONTROLLERS, Observation, PersonState, Pose, make_controller
+from companion.control import CONTROLLERS, make_controller
 from companion.errors import ConfigError
 from companion.params import Params
 from companion.sim.episode import run_episode
 from companion.sim.person import line
+from companion.types import Observation, PersonState, Pose
 
 
 @pytest.fixture(params=sorted(CONTROLLERS))

@@ -12,13 +12,13 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from companion.control import CONTROLLERS, Observation, PersonState, Pose, make_controller
-from companion.kinematics import unicycle_step
-from companion.obstacles import Circle, Wall
+from companion.control import CONTROLLERS, make_controller
+from companion.geometry import unicycle_step
 from companion.params import Params
-from companion.perception import Scan
+from companion.types import Circle, Observation, PersonState, Pose, Scan, Wall
 
 P = Params()
 LIMIT_V = max(P.supervisor.accel_max, P.supervisor.decel_max) * P.dt + 1e-9

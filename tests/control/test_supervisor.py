@@ -9,21 +9,18 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
 
-from companion.control import (Command, Observation, PersonState, Pose, SafetySupervisor,
-                               make_controller)
-from companion.kinematics import unicycle_step
-from companion.control.supervisor import (braking_speed, limit_rate, obstacle_clearances,
-                                          rollout_margins, speed_up_distance,
-                                          predict)
-from companion.obstacles import Circle, Wall
+from companion.control import SafetySupervisor, make_controller
+from companion.control.checks import Clock
+from companion.control.limits import limit_rate
+from companion.control.person_gate import PersonGate, predict
+from companion.geometry import unicycle_step
 from companion.params import Params
-from companion.perception import Scan
 from companion.sim.episode import run_episode
 from companion.sim.faults import Fault
 from companion.sim.person import Move, ScriptedWalk, line
 from companion.sim.sensing import make_perception
+from companion.types import Circle, Command, Observation, PersonState, Pose, Scan, Wall
 
 P = Params()
 S = P.supervisor
@@ -72,14 +69,6 @@ def test_limit_rate_grows_and_shrinks_at_their_own_rates():
     assert limit_rate(0.3, 0.25, 2.0, 4.0, 0.1) == 0.3                    # reachable: exact
 
 
-@pytest.mark.parametrize("gap", [0.01, 0.3, 1.0, 5.0])
-def test_braking_speed_stops_exactly_within_the_gap(gap):
-    a, dt = 2.5, 0.05
-    v = braking_speed(gap, a, dt)
-    assert v * dt + v * v / (2 * a) == pytest.approx(gap)
-    assert braking_speed(0.0, a, dt) == 0.0 and braking_speed(-1.0, a, dt) == 0.0
-
-
 def test_predict_follows_the_unicycle_arc():
     h = PersonState(0.0, 0.0, 0.0, 1.0, 0.5)
     q = predict(h, math.pi / 0.5)            # half a circle of radius 2
@@ -87,47 +76,37 @@ def test_predict_follows_the_unicycle_arc():
     assert predict(PersonState(1.0, 2.0, 0.0, 1.0, 0.0), 2.0).x == pytest.approx(3.0)
 
 
-def reference_margins(robot, current, targets, person, obstacles, p=P, horizon=1.2, step=0.1):
-    """What :func:`rollout_margins` computes, written with numpy over the candidates."""
-    s = p.supervisor
-    rate = min(s.accel_max, s.decel_max)
-    n = len(targets)
-    x, y, th = np.full(n, robot.x), np.full(n, robot.y), np.full(n, robot.theta)
-    margin = np.full(n, np.inf)
-    for k in range(1, int(round(horizon / step)) + 1):
-        t = k * step
-        v = current[0] + np.clip(targets[:, 0] - current[0], -rate * t, rate * t)
-        w = current[1] + np.clip(targets[:, 1] - current[1], -s.angular_accel_max * t,
-                                 s.angular_accel_max * t)
-        x = x + step * v * np.cos(th + 0.5 * step * w)
-        y = y + step * v * np.sin(th + 0.5 * step * w)
-        th = th + step * w
-        h = predict(person, t)
-        extra = speed_up_distance(person.v, s.person_accel, t)
-        hx, hy = h.x + extra * math.cos(person.theta), h.y + extra * math.sin(person.theta)
-        margin = np.minimum(margin, np.hypot(x - hx, y - hy) - s.protective_distance)
-        margin = np.minimum(margin, obstacle_clearances(x, y, obstacles, p.robot.radius))
-    return margin
+def test_person_gate_alone_predicts_rejects_loses_and_reacquires():
+    gate = PersonGate(S)
+    reasons = []
+    gate.advance(0.0)
+    gate.update(PersonState(0.0, 0.0, 0.0, 1.0, 0.0), reasons)
+    assert gate.now(reasons) == PersonState(0.0, 0.0, 0.0, 1.0, 0.0) and reasons == []
+    gate.advance(0.1)
+    gate.update(PersonState(5.0, 0.0, 0.0, 1.0, 0.0), reasons)      # 50 m/s: a switch
+    assert reasons == ["person_outlier"]
+    assert gate.now(reasons).x == pytest.approx(0.1)                 # predicted on
+    assert "person_predicted" not in reasons                         # already explained
+    for _ in range(5):
+        gate.advance(0.1)
+        gate.update(None, reasons)
+    assert gate.now(reasons) is None and gate.lost                   # 0.6 s > timeout
+    for k in range(4):                                               # consistent again
+        gate.advance(0.1)
+        gate.update(PersonState(2.0 + 0.1 * k, 0.0, 0.0, 1.0, 0.0), [])
+        assert gate.reacquiring or not gate.lost
+    assert not gate.lost and gate.reacquired
+    assert gate.now([]).x == pytest.approx(2.3)
 
 
-@settings(max_examples=100, deadline=None)
-@given(st.tuples(*[st.floats(-3, 3)] * 3), st.tuples(st.floats(-1.5, 1.5), st.floats(-1, 1)),
-       st.tuples(*[st.floats(-3, 3)] * 3, st.floats(-0.5, 2.0), st.floats(-2, 2)),
-       st.lists(st.tuples(st.floats(-3, 3), st.floats(-3, 3), st.floats(0, 1)), max_size=3),
-       st.lists(st.tuples(*[st.floats(-3, 3)] * 4), max_size=2))
-def test_compiled_rollout_equals_the_numpy_reference(pose, current, person, circles, walls):
-    robot, h = Pose(*pose), PersonState(*person)
-    obstacles = tuple(Circle(*c) for c in circles) + tuple(Wall(*w) for w in walls)
-    targets = np.random.default_rng(0).uniform(-1.5, 1.5, (36, 2))
-    np.testing.assert_allclose(rollout_margins(robot, current, targets, h, obstacles, P),
-                               reference_margins(robot, current, targets, h, obstacles),
-                               rtol=1e-12, atol=1e-12)
-
-
-def test_obstacle_clearances_for_circles_and_walls():
-    x, y = np.array([0.0, 3.0]), np.array([0.0, 0.0])
-    got = obstacle_clearances(x, y, [Circle(1.0, 0.0, 0.5), Wall(3.0, 1.0, 5.0, 1.0)], 0.25)
-    assert got == pytest.approx([0.25, 0.75])
+def test_clock_alone_counts_bad_steps_as_one_period():
+    clock = Clock(DT, S.max_step_ratio)
+    assert clock.tick(10.0) == (0.0, "ok") and clock.now == 10.0
+    assert clock.tick(10.05) == (pytest.approx(0.05), "ok")
+    for bad in (10.05, 9.0, math.nan):
+        assert clock.tick(bad) == (DT, "clock")
+    assert clock.tick(11.0)[1] == "clock_gap"
+    assert clock.now == pytest.approx(10.05 + 3 * DT + (11.0 - 9.0))
 
 
 def test_started_in_the_slot_it_is_ok_throughout():
@@ -317,7 +296,7 @@ def test_fault5_inside_the_protective_distance_no_motion_towards_the_person(name
         cmd = sup.step(Observation(k * DT, pose, h))
         assert math.isfinite(cmd.v) and math.isfinite(cmd.omega)
         nx, ny = pose.x - h.x, pose.y - h.y
-        if math.hypot(nx, ny) < S.protective_distance:
+        if math.hypot(nx, ny) < P.keepout.protective_distance:
             assert "protective_zone" in cmd.reason
             assert cmd.v * (math.cos(pose.theta) * nx + math.sin(pose.theta) * ny) >= -EPS
         pose = Pose(*unicycle_step(pose.x, pose.y, pose.theta, cmd.v, cmd.omega, DT))
@@ -347,7 +326,7 @@ def test_fault6_no_overshoot_into_the_protective_distance(case, name):
     p, moves, accel = FAULT6[case]
     person = ScriptedWalk((0.0, 0.0, 0.0), moves, accel=accel)
     log = run_episode(make_controller(name, p), person, p, person.duration + 3.0)
-    assert np.min(person_distance(log)) >= p.supervisor.protective_distance
+    assert np.min(person_distance(log)) >= p.keepout.protective_distance
     assert_within_limits(log, p)
 
 

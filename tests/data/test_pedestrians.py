@@ -16,9 +16,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.data.pedestrians import (CREDIT, ENV_VAR, SCENES, Track, default_data_dir,
-                                        evaluate_tracks, load_scenes, load_tracks,
-                                        select_tracks)
+from companion.apps.pedestrians import evaluate_tracks
+from companion.data.pedestrians import (
+    CREDIT,
+    ENV_VAR,
+    SCENES,
+    Track,
+    default_data_dir,
+    load_scenes,
+    load_tracks,
+    select_tracks,
+)
 from companion.errors import DataError
 from companion.params import Params
 

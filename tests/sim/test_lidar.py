@@ -7,10 +7,11 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from companion.config import build, field_docs
-from companion.control.base import Pose
 from companion.errors import ConfigError
-from companion.obstacles import Circle, Wall, surface_distance
-from companion.sim.lidar import LidarParams, Scan, beam_angles, cast, scan_points
+from companion.geometry import clearance
+from companion.params import LidarParams
+from companion.sim.lidar import beam_angles, cast, scan_points
+from companion.types import Circle, Pose, Scan, Wall
 
 EXACT = LidarParams(noise_std=0.0)
 ORIGIN = Pose(0.0, 0.0, 0.0)
@@ -238,14 +239,14 @@ def test_every_return_lies_on_a_surface(world):
     objects = list(circles) + list(walls)
     if person is not None:
         objects.append(Circle(person[0], person[1], params.person_radius))
-    assume(all(surface_distance(o, pose.x, pose.y) > 1e-6 for o in objects))
+    assume(all(clearance(o, pose.x, pose.y) > 1e-6 for o in objects))
     scan = cast(pose, circles, walls, person, params, None)
     assert not np.isnan(scan.ranges).any()
     finite = np.isfinite(scan.ranges)
     assert np.all(scan.ranges[finite] <= params.range_max)
     # nothing is hit nearer than the nearest surface
-    clearance = min((surface_distance(o, pose.x, pose.y) for o in objects), default=math.inf)
-    assert np.all(scan.ranges[finite] >= clearance - 1e-9)
+    nearest = min((clearance(o, pose.x, pose.y) for o in objects), default=math.inf)
+    assert np.all(scan.ranges[finite] >= nearest - 1e-9)
     for x, y in scan_points(scan):
-        gap = min(abs(surface_distance(o, x, y)) for o in objects)
+        gap = min(abs(clearance(o, x, y)) for o in objects)
         assert gap <= 1e-9 * (1.0 + math.hypot(x - pose.x, y - pose.y))

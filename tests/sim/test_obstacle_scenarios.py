@@ -8,10 +8,10 @@ import pytest
 
 from companion import metrics
 from companion.control import make_controller
-from companion.obstacles import Circle
 from companion.sim.episode import run_episode
 from companion.sim.scenario import load_scenario
 from companion.sim.sensing import LidarPerception, make_perception
+from companion.types import Circle
 
 
 def run(name, source):
@@ -59,7 +59,7 @@ def test_lidar_perception_sees_the_obstacle_and_not_the_person():
                                                                  noise_std=0.0))
     perc = LidarPerception(p)
     rng = np.random.default_rng(0)
-    from companion.control.base import Pose
+    from companion.types import Pose
     robot = Pose(4.0, -1.8, 0.0)
     person = (4.0, -0.8)
     seen = perc.obstacles(0, robot, sc.obstacles, person, person, rng)

@@ -6,16 +6,16 @@ The short run is part of the default suite; the simulated hour is marked ``slow`
 import numpy as np
 import pytest
 
+from companion.geometry import obstacle_arrays, path_clearance
 from companion.params import Params
 from companion.sim.soak import make_world, run_soak
-from companion.control.supervisor import obstacle_clearances
 
 
 def check(summary):
     assert summary["finite"]
     assert summary["person_collisions"] == 0
     assert summary["obstacle_collisions"] == 0
-    assert summary["min_person_distance_m"] >= Params().supervisor.protective_distance
+    assert summary["min_person_distance_m"] >= Params().keepout.protective_distance
     assert summary["min_obstacle_clearance_m"] > 0.0
 
 
@@ -24,7 +24,7 @@ def test_the_walker_keeps_its_margin_and_does_everything():
     t = np.arange(0.0, 600.0, 0.1)
     states = [world.person.state(x) for x in t]
     x, y = np.array([h.x for h in states]), np.array([h.y for h in states])
-    assert np.min(obstacle_clearances(x, y, world.obstacles, 0.0)) >= 1.2 - 1e-9
+    assert path_clearance(x, y, obstacle_arrays(world.obstacles), 0.0) >= 1.2 - 1e-9
     v = np.array([h.v for h in states])
     w = np.array([h.omega for h in states])
     assert np.any(v == 0.0) and np.max(v) > 1.2             # stops and brisk walking

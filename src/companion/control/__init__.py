@@ -1,4 +1,5 @@
-"""Companion controllers behind one interface (:mod:`companion.control.base`).
+"""Companion controllers behind one interface (:mod:`companion.control.base`) and the standard
+stack every one of them runs in: safety supervisor -> avoidance layer -> controller.
 
 ``CONTROLLERS`` maps the names accepted by ``companion run --controller`` to factories.
 """
@@ -7,29 +8,30 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
+from companion.config import hint
 from companion.control.avoidance import AvoidingController
-from companion.control.base import Command, Controller, Observation, PersonState, Pose, saturate
+from companion.control.base import Controller, saturate
 from companion.control.impedance import ImpedanceController
 from companion.control.lqr import LqrController
 from companion.control.pid import PidController
 from companion.control.supervisor import SafetySupervisor
 from companion.control.vsm import VsmController
 from companion.errors import ConfigError
-from companion.config import hint
 from companion.params import Params
 
 
 def paper_params(params: Params) -> Params:
     """The paper's design: LQR linearised at the desired state, u_d = u_h, no error clipping,
-    no keep-out barriers, the paper's phi in Eq. 17 (no collision cone)."""
+    the paper's phi in Eq. 17 (no collision cone) and no comfort barriers (the supervisor's
+    protective distance and braking bounds stay: they are not part of the compared design)."""
     lqr = dataclasses.replace(params.lqr, linearize_at="desired", feedforward="person",
                               error_clip=(math.inf, math.inf, math.inf))
-    safety = dataclasses.replace(params.safety, person_clearance=0.0, obstacle_clearance=0.0)
+    keepout = dataclasses.replace(params.keepout, person_clearance=0.0, obstacle_clearance=0.0)
     avoidance = dataclasses.replace(params.avoidance, cone_margin=-1.0)
-    return dataclasses.replace(params, lqr=lqr, safety=safety, avoidance=avoidance)
+    return dataclasses.replace(params, lqr=lqr, keepout=keepout, avoidance=avoidance)
 
 
 def paper_lqr(params: Params) -> LqrController:
@@ -67,18 +69,30 @@ CONTROLLERS: dict[str, Entry] = {
 }
 
 
-def make_controller(name: str, params: Params) -> SafetySupervisor:
-    """Construct the registered controller ``name`` inside the avoidance layer (the same
-    module for every controller, as in the paper's Fig. 4) and the safety supervisor (the
-    standard stack); unknown names raise ConfigError."""
+def lookup(name: str) -> Entry:
+    """The registered controller ``name``; an unknown name raises ConfigError with a hint."""
     if name not in CONTROLLERS:
         raise ConfigError(f"controller: unknown controller {name!r}{hint(name, CONTROLLERS)} "
                           f"(known: {', '.join(CONTROLLERS)})")
-    entry = CONTROLLERS[name]
+    return CONTROLLERS[name]
+
+
+def make_bare(name: str, params: Params) -> Controller:
+    """The registered controller ``name`` alone, without avoidance layer and supervisor."""
+    entry = lookup(name)
+    return entry.factory(entry.adjust(params))
+
+
+def make_controller(name: str, params: Params) -> SafetySupervisor:
+    """The standard stack of the registered controller ``name``: the safety supervisor around
+    the avoidance layer (the same module for every controller, as in the paper's Fig. 4)
+    around the controller."""
+    entry = lookup(name)
     params = entry.adjust(params)
     return SafetySupervisor(AvoidingController(entry.factory(params), params), params)
 
 
-__all__ = ["AvoidingController", "CONTROLLERS", "Command", "Controller", "ImpedanceController",
-           "LqrController", "Observation", "PersonState", "PidController", "Pose", "SafetySupervisor",
-           "VsmController", "make_controller", "paper_lqr", "paper_params", "saturate"]
+__all__ = ["AvoidingController", "CONTROLLERS", "Controller", "ImpedanceController",
+           "LqrController", "PidController", "SafetySupervisor", "VsmController",
+           "lookup", "make_bare", "make_controller", "paper_lqr", "paper_params", "saturate",
+           "tuned_lqr_params"]

@@ -8,7 +8,9 @@ acceleration (Eq. 17, after Fajen and Warren)
 with ``phi`` the obstacle's bearing in the robot frame (wrapped to (-pi, pi]; phi > 0 means on
 the left, which turns the robot right). The accelerations are summed (Eq. 19) and integrated
 into an angular-velocity offset ``u_ob`` that is added to the wrapped controller's omega
-(Eq. 20). Choices where the paper is silent (NOTES.md 8-9, docs/model.md section 8):
+(Eq. 20). This layer only steers; keeping clear of obstacles and the person is the safety
+supervisor's duty (:mod:`companion.control.keepout`). Choices where the paper is silent
+(docs/model.md, section 8):
 
 * ``rho_ob`` is the clearance: distance from the robot's footprint (a circle of
   ``robot.radius`` around the wheel axle) to the obstacle surface; ``phi`` is the bearing of
@@ -24,13 +26,12 @@ into an angular-velocity offset ``u_ob`` that is added to the wrapped controller
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
-from companion.control.base import Command, Controller, Observation
-from companion.control.safety import safe_speed
-from companion.kinematics import wrap_pi
-from companion.obstacles import Circle, Obstacle, nearest_point, surface_distance
+from companion.control.base import Controller
+from companion.geometry import clearance, nearest_point, wrap_pi
 from companion.params import AvoidanceParams, Params
+from companion.types import Circle, Command, Observation, Obstacle
 
 
 def influence_range(obstacle: Obstacle, avoidance: AvoidanceParams) -> float:
@@ -41,11 +42,6 @@ def influence_range(obstacle: Obstacle, avoidance: AvoidanceParams) -> float:
     if isinstance(obstacle, Circle):
         return obstacle.radius / avoidance.k_ob
     return avoidance.wall_influence
-
-
-def clearance(obstacle: Obstacle, x: float, y: float, footprint: float) -> float:
-    """Distance from a footprint circle at (x, y) to the obstacle surface (< 0: overlap)."""
-    return surface_distance(obstacle, x, y) - footprint
 
 
 def angular_acceleration(phi: float, rho_ob: float, avoidance: AvoidanceParams) -> float:
@@ -107,9 +103,8 @@ def collision_cone(obstacle: Obstacle, x: float, y: float, inflate: float) -> fl
 
 class AvoidingController:
     """Wraps any :class:`~companion.control.base.Controller` with behavioural-dynamics
-    avoidance of ``obs.obstacles`` (see the module docstring) and the keep-out barriers of
-    :mod:`companion.control.safety`, and reports the final command back to it. The command's
-    ``u_ob`` field is the avoidance part of omega."""
+    avoidance of ``obs.obstacles`` (see the module docstring); the command's ``u_ob`` field is
+    the avoidance part of omega."""
 
     def __init__(self, inner: Controller, params: Params):
         self.inner = inner
@@ -132,13 +127,9 @@ class AvoidingController:
         tau = self.params.avoidance.decay_time
         u_ob = self.u_ob * self._decay + acc * tau * (1.0 - self._decay)
         w_max = self.params.robot.omega_max
-        u_ob = min(max(u_ob, -w_max - cmd.omega), w_max - cmd.omega)
-        self.u_ob = u_ob
-        v = safe_speed(cmd.v, r, h, obs.obstacles, self.params)
-        final = Command(v, cmd.omega + u_ob, u_ob)
-        self.inner.applied(final)
-        return final
+        self.u_ob = min(max(u_ob, -w_max - cmd.omega), w_max - cmd.omega)
+        return Command(cmd.v, cmd.omega + self.u_ob, self.u_ob)
 
     def applied(self, cmd: Command) -> None:
-        """Pass the command finally sent (after the safety supervisor) on to the controller."""
+        """Pass the command finally sent on to the wrapped controller."""
         self.inner.applied(cmd)

@@ -27,10 +27,19 @@ heading, ``e = e_dot = 0`` and ``V = S_dot``: the input is exactly the one that 
 
 from __future__ import annotations
 
-from companion.control.base import Command, Observation, saturate
-from companion.control.slot import (LastCommand, from_frame, last_velocity, reference_point,
-                                    slot_point, slot_velocity, to_frame, to_inputs)
+from companion.control.base import saturate
+from companion.control.slot import (
+    LastCommand,
+    from_frame,
+    last_velocity,
+    reference_point,
+    slot_point,
+    slot_velocity,
+    to_frame,
+    to_inputs,
+)
 from companion.params import Params
+from companion.types import Command, Observation
 
 
 class ImpedanceController(LastCommand):

@@ -34,11 +34,12 @@ from __future__ import annotations
 
 import math
 
-from companion.control.base import Command, Observation, saturate
+from companion.control.base import saturate
 from companion.control.slot import reference_point, slot_point, slot_velocity, to_frame
-from companion.kinematics import wrap_pi
+from companion.geometry import wrap_pi
 from companion.model import slot_reference
 from companion.params import Params
+from companion.types import Command, Observation
 
 
 def _clamp(x: float, limit: float) -> float:

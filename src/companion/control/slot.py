@@ -18,13 +18,14 @@ from __future__ import annotations
 
 import math
 
-from companion.control.base import Command, PersonState, Pose
+from companion.geometry import offset_point
 from companion.params import Params
+from companion.types import Command, PersonState, Pose
 
 
 def reference_point(robot: Pose, d: float) -> tuple[float, float]:
     """R, the point ``d`` ahead of the wheel axle."""
-    return robot.x + d * math.cos(robot.theta), robot.y + d * math.sin(robot.theta)
+    return offset_point(robot.x, robot.y, robot.theta, d)
 
 
 def slot_point(person: PersonState, params: Params) -> tuple[float, float]:

@@ -24,10 +24,17 @@ person and the position along the walk alike.
 
 from __future__ import annotations
 
-from companion.control.base import Command, Observation, saturate
-from companion.control.slot import (LastCommand, last_velocity, reference_point, slot_point,
-                                    slot_velocity, to_inputs)
+from companion.control.base import saturate
+from companion.control.slot import (
+    LastCommand,
+    last_velocity,
+    reference_point,
+    slot_point,
+    slot_velocity,
+    to_inputs,
+)
 from companion.params import Params
+from companion.types import Command, Observation
 
 
 class VsmController(LastCommand):

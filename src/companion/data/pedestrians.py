@@ -5,10 +5,8 @@ The files live outside the repository, in ``../shared/data/pedestrians`` (see it
 ``frame ped_id x y`` (frames and ids written as floats, x and y in metres); time is
 ``frame / 25`` s and each pedestrian has one row every 0.4 s. Every scene has its own frame.
 
-Typical use::
-
-    tracks = select_tracks(load_scenes())
-    rows = evaluate_tracks(tracks, Params())
+Typical use: ``tracks = select_tracks(load_scenes())``;
+:func:`companion.apps.pedestrians.evaluate_tracks` runs the companion beside them.
 
 Any result computed on these data must carry the credit in :data:`CREDIT`.
 """
@@ -16,19 +14,14 @@ Any result computed on these data must carry the credit in :data:`CREDIT`.
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Mapping
 
 import numpy as np
 
-from companion.control import make_controller
 from companion.errors import DataError
-from companion.metrics import compute
-from companion.params import Params
-from companion.sim.episode import run_episode
-from companion.sim.recorded import (DEFAULT_SMOOTHING, RecordedPerson, gap_faults,
-                                    parse_number)
+from companion.io import parse_number
 
 #: Frames per second of the ETH/UCY annotations: time = frame / FRAME_RATE.
 FRAME_RATE = 25.0
@@ -228,41 +221,3 @@ def select_tracks(tracks: Mapping[int, Track] | Iterable[Track], min_mean_speed:
     items = tracks.values() if isinstance(tracks, Mapping) else tracks
     return [tr for tr in items
             if tr.mean_speed > min_mean_speed and tr.duration >= min_duration]
-
-
-def evaluate_tracks(tracks: Iterable[Track], params: Params, controller_name: str = "lqr",
-                    smoothing: float = DEFAULT_SMOOTHING) -> list[dict]:
-    """Run the companion controller beside each track's person and summarise each episode.
-
-    For each track the person is a :class:`~companion.sim.recorded.RecordedPerson`
-    (smoothing time constant ``smoothing`` s), the robot starts in its slot aligned with the
-    person (``params.formation``; the default is 1 m on the left) and the episode lasts the
-    track's duration.
-
-    Returns
-    -------
-    list of dict
-        One row per track: ``scene``, ``ped_id``, ``duration_s``, ``mean_speed_mps`` (raw
-        track), ``max_person_speed_mps`` (smoothed), and the metrics ``rmse_rho_m``,
-        ``rmse_alpha_rad``, ``min_person_distance_m`` and ``finite`` of
-        :func:`companion.metrics.compute`.
-    """
-    rows = []
-    for track in tracks:
-        person = RecordedPerson(track.t, track.x, track.y, smoothing=smoothing)
-        log = run_episode(make_controller(controller_name, params), person, params,
-                          duration=person.duration, start=None,
-                          faults=gap_faults(person, params.supervisor.person_timeout))
-        metrics = compute(log)
-        rows.append({
-            "scene": track.scene,
-            "ped_id": track.ped_id,
-            "duration_s": track.duration,
-            "mean_speed_mps": track.mean_speed,
-            "max_person_speed_mps": float(np.max(log["person_v"])),
-            "rmse_rho_m": metrics["rmse_rho_m"],
-            "rmse_alpha_rad": metrics["rmse_alpha_rad"],
-            "min_person_distance_m": metrics["min_person_distance_m"],
-            "finite": metrics["finite"],
-        })
-    return rows

@@ -9,16 +9,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from typing import Iterator, Sequence
 
-from companion import metrics
-from companion.control import make_controller
-from companion.control.base import Pose
-from companion.model import LEFT, RIGHT
-from companion.params import Params
-from companion.sim.episode import Log, run_episode
+from companion.params import LEFT, RIGHT, Params
 from companion.sim.person import line
+from companion.sim.runner import EpisodeSpec
+from companion.types import Pose
 
 PERSON_START = (3.0, 3.0, 0.0)
 STARTS = ((3.0, 6.0), (0.0, 5.0), (0.0, 3.0), (0.0, 1.0), (3.0, 0.0))
@@ -48,15 +45,14 @@ def cases(speeds: Sequence[float] = SPEEDS) -> Iterator[Case]:
                     yield Case(speed, Pose(x, y, heading), side)
 
 
-def run_case(case: Case, controller: str, params: Params, duration: float = 30.0
-             ) -> tuple[Log, dict]:
-    """Run one case; returns the log and its metrics."""
+def episode(case: Case, controller: str, params: Params, duration: float = 30.0
+            ) -> EpisodeSpec:
+    """The runner's episode of one case."""
     bearing = LEFT if case.side == "left" else RIGHT
     p = dataclasses.replace(params, formation=dataclasses.replace(params.formation,
                                                                   bearing=bearing))
-    log = run_episode(make_controller(controller, p), line(PERSON_START, case.speed), p,
-                      duration, start=case.start)
-    return log, metrics.compute(log)
+    return EpisodeSpec(controller, line(PERSON_START, case.speed), p, duration,
+                       start=case.start)
 
 
 CSV_COLUMNS = ("person_speed_mps", "start_x_m", "start_y_m", "start_theta_rad", "side",

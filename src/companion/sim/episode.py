@@ -10,31 +10,21 @@ and the command applied from ``t_k`` on. The run is deterministic for a given se
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
-from companion.control.avoidance import clearance
-from companion.control.base import Command, Controller, Observation, PersonState, Pose
-from companion.kinematics import unicycle_step
+from companion.control.base import Controller
 from companion.errors import ConfigError
+from companion.geometry import clearance, unicycle_step, wrap_pi
 from companion.model import relative_state, robot_pose_at, slot_reference
-from companion.obstacles import Obstacle
 from companion.params import Params
-from companion.sim.faults import Fault, apply as apply_faults, stalled
-from companion.sim.sensing import GroundTruth, Perception
+from companion.sim.faults import Fault, stalled
+from companion.sim.faults import apply as apply_faults
 from companion.sim.person import PersonMotion
-
-LOG_COLUMNS = ("t", "robot_x", "robot_y", "robot_theta", "person_x", "person_y",
-               "person_theta", "person_v", "person_omega", "rho", "alpha", "beta",
-               "rho_d", "alpha_d", "beta_ref", "v", "omega", "u_ob", "rho_ob")
-"""``u_ob``: the avoidance part of omega (rad/s); ``rho_ob``: clearance (m) from the robot's
-footprint to the nearest true obstacle surface (NaN without obstacles)."""
-
-TEXT_COLUMNS = ("status", "reason")
-"""The safety supervisor's status (ok, degraded, stopped) and reason per sample
-(docs/safety.md); "ok" and "" for controllers without a supervisor."""
+from companion.sim.sensing import GroundTruth, Perception
+from companion.types import LOG_COLUMNS, Command, Log, Observation, Obstacle, PersonState, Pose
 
 
 @dataclass(frozen=True)
@@ -45,20 +35,6 @@ class SensorNoise:
     heading: float = 0.0    # rad
     speed: float = 0.0      # m/s
     turn_rate: float = 0.0  # rad/s
-
-
-@dataclass(frozen=True)
-class Log:
-    """Columns of one episode (names in :data:`LOG_COLUMNS`, float arrays, and
-    :data:`TEXT_COLUMNS`, string arrays), each of length N."""
-
-    columns: dict[str, np.ndarray]
-
-    def __getitem__(self, name: str) -> np.ndarray:
-        return self.columns[name]
-
-    def __len__(self) -> int:
-        return len(self.columns["t"])
 
 
 def start_in_slot(person: PersonState, params: Params) -> Pose:
@@ -159,7 +135,7 @@ def run_episode(controller: Controller, person: PersonMotion, params: Params,
         status.append(cmd.status)
         reason.append(cmd.reason)
         x, y, th = unicycle_step(x, y, th, cmd.v, cmd.omega, dt)
-        th = math.remainder(th, 2.0 * math.pi)
+        th = wrap_pi(th)
     columns: dict[str, np.ndarray] = {name: out[:, i] for i, name in enumerate(LOG_COLUMNS)}
     columns["status"] = np.array(status, dtype=str)
     columns["reason"] = np.array(reason, dtype=str)

@@ -23,16 +23,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 from companion.config import Validated, build, non_negative, param, positive
-from companion.control.base import Observation, PersonState, Pose
 from companion.errors import ConfigError
-from companion.obstacles import Circle
-from companion.perception import Scan
+from companion.types import Circle, Observation, PersonState, Pose, Scan
 
 KINDS = ("person_dropout", "person_nan", "person_jump", "robot_nan", "obstacle_nan",
          "scan_blackout", "clock_freeze", "clock_backward", "stall")

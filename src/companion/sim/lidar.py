@@ -1,10 +1,10 @@
 """A simulated planar (2D) LiDAR: exact, vectorised ray casting against the world's obstacles.
 
 The sensor sits at the robot's pose (the wheel-axle centre, see
-:class:`~companion.control.base.Pose`) and casts one ray per beam. Each ray is intersected in
+:class:`~companion.types.Pose`) and casts one ray per beam. Each ray is intersected in
 closed form with every circle, every wall segment and the person's body (a circle of radius
 :attr:`LidarParams.person_radius` around the person's position); the nearest hit is the
-beam's range. Walls have zero thickness (their centre-line, as in :mod:`companion.obstacles`).
+beam's range. Walls have zero thickness (their centre-line, as in :mod:`companion.geometry`).
 
 Conventions
 
@@ -26,51 +26,15 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
-from companion.config import Validated, non_negative, param, positive
-from companion.obstacles import Circle, Wall
-from companion.perception import Scan
+from companion.geometry import TWO_PI, wall_clearance
+from companion.params import LidarParams
+from companion.types import Circle, Pose, Scan, Wall
 
-if TYPE_CHECKING:  # run-time import would cycle: params -> lidar -> control.base -> params
-    from companion.control.base import Pose
-
-TWO_PI = 2.0 * math.pi
 _FULL_CIRCLE_TOL = 1e-9
-_MIN_RESOLUTION = 1e-4  # rad; 2*pi / 1e-4 ~ 63k beams, a sane upper bound on the beam count
-
-
-def _fov(x: float) -> str | None:
-    return None if 0.0 < x <= TWO_PI + _FULL_CIRCLE_TOL else "an angle in (0, 2*pi] rad"
-
-
-def _resolution(x: float) -> str | None:
-    return (None if _MIN_RESOLUTION <= x <= math.pi
-            else f"an angle in [{_MIN_RESOLUTION:g}, pi] rad")
-
-
-@dataclass(frozen=True)
-class LidarParams(Validated):
-    """A simulated 2D LiDAR mounted at the robot's pose."""
-
-    fov: float = param(TWO_PI, "rad", "field of view, centred on the robot's heading, in "
-                       "(0, 2*pi]; 2*pi is a full 360 degree scan", _fov)
-    range_max: float = param(10.0, "m", "maximum range; beams hitting nothing closer return "
-                             "inf", positive)
-    resolution: float = param(math.radians(0.5), "rad",
-                              "angular step between beams (0.5 deg: 720 beams per revolution, "
-                              "a typical indoor LiDAR, and fast to simulate); for a full circle "
-                              "it is rounded so that it divides 2*pi", _resolution)
-    rate: float = param(10.0, "Hz", "scans per second; the simulator scans every "
-                        "round(1 / (rate * dt)) control steps and holds the result in between",
-                        positive)
-    noise_std: float = param(0.01, "m", "standard deviation of the Gaussian noise added to "
-                             "every finite range (clipped at 0); 0 = exact", non_negative)
-    person_radius: float = param(0.2, "m", "radius of the circle that stands for the person's "
-                                 "body in the scan", positive)
 
 
 @functools.lru_cache(maxsize=16)
@@ -147,17 +111,7 @@ def _ray_segments(ox: float, oy: float, dirs: np.ndarray,
     return t.min(axis=1)
 
 
-def _segment_distance(px: float, py: float, w: np.ndarray) -> np.ndarray:
-    """Distance from (px, py) to each segment ``(x0, y0, ex, ey)`` of ``w`` (k, 4)."""
-    x0, y0, ex, ey = w.T
-    len2 = ex * ex + ey * ey
-    with np.errstate(invalid="ignore", divide="ignore"):
-        s = np.where(len2 > 0.0, ((px - x0) * ex + (py - y0) * ey) / len2, 0.0)
-    s = np.clip(s, 0.0, 1.0)
-    return np.hypot(px - x0 - s * ex, py - y0 - s * ey)
-
-
-def cast(pose: "Pose", circles: Sequence[Circle], walls: Sequence[Wall],
+def cast(pose: Pose, circles: Sequence[Circle], walls: Sequence[Wall],
          person: tuple[float, float] | None, params: LidarParams,
          rng: np.random.Generator | None = None) -> Scan:
     """Cast one scan from ``pose`` against the circles, walls and the person.
@@ -201,10 +155,10 @@ def cast(pose: "Pose", circles: Sequence[Circle], walls: Sequence[Wall],
             ranges = np.minimum(ranges, _ray_circles(ox, oy, dirs, cx_[near], cy_[near],
                                                      cr_[near]))
     if walls:
-        w = np.array([(s.x0, s.y0, s.x1 - s.x0, s.y1 - s.y0) for s in walls], float)
-        near = _segment_distance(ox, oy, w) <= params.range_max
-        if near.any():
-            w = w[near]
+        near = [w for w in walls
+                if wall_clearance(ox, oy, w.x0, w.y0, w.x1, w.y1) <= params.range_max]
+        if near:
+            w = np.array([(s.x0, s.y0, s.x1 - s.x0, s.y1 - s.y0) for s in near], float)
             ranges = np.minimum(ranges, _ray_segments(ox, oy, dirs, w[:, 0], w[:, 1],
                                                       w[:, 2], w[:, 3]))
 

@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Protocol, Sequence
+from typing import Protocol
 
-from companion.control.base import PersonState
+from companion.types import PersonState
 
 
 class PersonMotion(Protocol):

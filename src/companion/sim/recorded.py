@@ -29,16 +29,17 @@ from __future__ import annotations
 
 import csv
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 from scipy.interpolate import make_smoothing_spline
 
-from companion.control.base import PersonState
 from companion.errors import DataError
-from companion.kinematics import wrap_pi
+from companion.geometry import wrap_pi
+from companion.io import parse_number
 from companion.sim.faults import Fault
+from companion.types import PersonState
 
 #: Column names a person CSV must have, in this order.
 CSV_COLUMNS = ("t", "x", "y")
@@ -313,18 +314,6 @@ def _parse_row(name: str, line: int, row: list[str]) -> tuple[float, float, floa
     t, x, y = (parse_number(f"{name}:{line}", col, cell)
                for col, cell in zip(CSV_COLUMNS, row))
     return t, x, y
-
-
-def parse_number(where: str, col: str, cell: str) -> float:
-    """A finite float from a data-file cell, or a one-line DataError naming ``where`` and ``col``."""
-    text = cell.strip()
-    try:
-        value = float(text)
-    except ValueError:
-        raise DataError(f"{where}: column '{col}': expected a number, got {text!r}") from None
-    if not math.isfinite(value):
-        raise DataError(f"{where}: column '{col}': expected a finite number, got {text!r}")
-    return value
 
 
 def gap_faults(person: RecordedPerson, timeout: float) -> tuple[Fault, ...]:

@@ -43,24 +43,31 @@ Example::
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
-from companion.config import (build, convert, hint, load_toml, non_negative, param, positive,
-                              reject_unknown)
-from companion.control.base import Pose
+from companion.config import (
+    build,
+    convert,
+    hint,
+    load_toml,
+    non_negative,
+    param,
+    positive,
+    reject_unknown,
+)
 from companion.errors import ConfigError
-from companion.model import LEFT, RIGHT, relative_state
-from companion.obstacles import Circle, Obstacle, Wall
-from companion.params import Params, params_from_mapping
-from companion.control import make_controller
-from companion.sim.episode import Log, run_episode
-from companion.sim.sensing import make_perception
-from companion.sim.person import Figure8, PersonMotion, Segment, SegmentPath, circle, line, u_shape
+from companion.model import relative_state
+from companion.params import LEFT, RIGHT, Params, params_from_mapping
 from companion.sim.faults import Fault, faults_from_list
+from companion.sim.person import Figure8, PersonMotion, Segment, SegmentPath, circle, line, u_shape
 from companion.sim.recorded import RecordedPerson, gap_faults, load_person_csv
+from companion.sim.runner import EpisodeSpec, run_one
+from companion.sim.sensing import OBSTACLE_SOURCES
+from companion.types import Circle, Log, Obstacle, Pose, Wall
 
 Triple = tuple[float, float, float]
 
@@ -209,8 +216,17 @@ class Scenario:
     obstacle_source: str = "truth"
     faults: tuple[Fault, ...] = ()
 
+    def episode(self, controller: str | None = None, obstacle_source: str | None = None
+                ) -> EpisodeSpec:
+        """This scenario as one episode of the runner, optionally with another controller or
+        obstacle source."""
+        return EpisodeSpec(controller or self.controller, self.person, self.params,
+                           self.duration, start=self.start, seed=self.seed,
+                           obstacles=self.obstacles,
+                           obstacle_source=obstacle_source or self.obstacle_source,
+                           faults=self.faults)
 
-OBSTACLE_SOURCES = ("truth", "lidar")
+
 TOP_KEYS = ("name", "description", "duration", "seed", "controller", "obstacle_source",
             "person", "robot", "obstacles", "params", "faults")
 
@@ -315,12 +331,7 @@ def load_scenario(name_or_path: str, params_override: Mapping[str, Any] | None =
     return scenario_from_mapping(load_toml(path), str(path), path.parent, params_override)
 
 
-
 def run_scenario(sc: Scenario, controller: str | None = None,
                  obstacle_source: str | None = None) -> Log:
     """Simulate a scenario (optionally with another controller or obstacle source)."""
-    params = sc.params
-    return run_episode(make_controller(controller or sc.controller, params), sc.person, params,
-                       sc.duration, start=sc.start, seed=sc.seed, obstacles=sc.obstacles,
-                       perception=make_perception(obstacle_source or sc.obstacle_source,
-                                                  params), faults=sc.faults)
+    return run_one(sc.episode(controller, obstacle_source))

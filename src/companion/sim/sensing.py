@@ -8,15 +8,16 @@ holds them until the next scan.
 
 from __future__ import annotations
 
-from typing import Protocol, Sequence
+from collections.abc import Sequence
+from typing import Protocol
 
 import numpy as np
 
-from companion.control.base import Pose
-from companion.obstacles import Circle, Obstacle, Wall
-from companion.perception import Scan, extract_obstacles
-from companion.sim.lidar import cast
+from companion.errors import ConfigError
 from companion.params import Params
+from companion.perception import extract_obstacles
+from companion.sim.lidar import cast
+from companion.types import Circle, Obstacle, Pose, Scan, Wall
 
 
 class Perception(Protocol):
@@ -77,10 +78,15 @@ class LidarPerception:
         return self.last_scan
 
 
+#: Where the controller's obstacles come from (see the module docstring).
+OBSTACLE_SOURCES = ("truth", "lidar")
+
+
 def make_perception(source: str, params: Params) -> Perception:
-    """``"truth"`` or ``"lidar"`` (see the module docstring)."""
+    """The perception of ``source``, one of :data:`OBSTACLE_SOURCES`."""
     if source == "truth":
         return GroundTruth()
     if source == "lidar":
         return LidarPerception(params)
-    raise ValueError(f"make_perception: source must be 'truth' or 'lidar', got {source!r}")
+    raise ConfigError(f"obstacle_source: expected one of {', '.join(OBSTACLE_SOURCES)}, "
+                      f"got {source!r}")

@@ -16,13 +16,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.control import make_controller
-from companion.control.supervisor import obstacle_clearances
+from companion.geometry import obstacle_arrays, path_clearance
 from companion.metrics import obstacle_metrics, status_shares
-from companion.obstacles import Circle, Obstacle, Wall
 from companion.params import Params
-from companion.sim.episode import Log, run_episode
 from companion.sim.person import Move, Row, ScriptedWalk, integrate_move
+from companion.sim.runner import EpisodeSpec, run_one
+from companion.types import Circle, Log, Obstacle, Wall
 
 #: Half the side of the square arena (m), centred on the origin.
 ARENA = 15.0
@@ -76,7 +75,7 @@ def _random_move(rng: np.random.Generator) -> list[Move]:
 def _clear(rows: list[Row], obstacles: tuple[Obstacle, ...], margin: float) -> bool:
     x = np.array([r[0] for r in rows])
     y = np.array([r[1] for r in rows])
-    return bool(np.all(obstacle_clearances(x, y, obstacles, 0.0) >= margin))
+    return path_clearance(x, y, obstacle_arrays(obstacles), 0.0) >= margin
 
 
 def random_walk(rng: np.random.Generator, duration: float, obstacles: tuple[Obstacle, ...],
@@ -141,6 +140,6 @@ def run_soak(duration: float, seed: int = 0, controller: str = "lqr",
     """Simulate ``duration`` s of the soak world of ``seed``; returns (summary, log)."""
     params = params or Params()
     world = make_world(seed, duration)
-    log = run_episode(make_controller(controller, params), world.person, params, duration,
-                      obstacles=world.obstacles, seed=seed)
+    log = run_one(EpisodeSpec(controller, world.person, params, duration, seed=seed,
+                              obstacles=world.obstacles))
     return summarize(log, params), log

@@ -1,8 +1,7 @@
-"""Property tests of the compiled LQR gain (:mod:`companion.fastlqr`) against the scipy path.
-
-The reference is what :meth:`companion.control.lqr.LqrController.gain` computes:
-:func:`companion.model.jacobians`, :func:`companion.model.discretize`,
-:func:`companion.lqr.augment` and :func:`companion.lqr.dlqr` (scipy's ``solve_discrete_are``).
+"""Property tests of the compiled Riccati solver (:func:`companion.riccati.dare_gain`) and the
+compiled LQR model against the reference path: :func:`companion.model.jacobians`,
+:func:`companion.model.discretize`, :func:`companion.riccati.augment` and
+:func:`companion.riccati.dlqr` (scipy's ``solve_discrete_are``).
 
 Where the two may legitimately differ
 -------------------------------------
@@ -38,22 +37,21 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import types
 
 import numpy as np
 import pytest
 from hypothesis import event, given, settings
 from hypothesis import strategies as st
 
-from companion import fastlqr
-from companion.control import CONTROLLERS, Pose
-from companion.control.lqr import LqrController
-from companion.kinematics import wrap_2pi, wrap_pi
-from companion.lqr import augment, dlqr, riccati_residual
-from companion.model import discretize, jacobians, relative_state, slot_reference
-from companion.params import LqrParams, Params
+from companion import riccati
+from companion.control import CONTROLLERS
+from companion.control.lqr import LqrController, augmented_model
+from companion.model import discretize, jacobians
+from companion.params import LqrParams, Params, RobotParams
+from companion.riccati import augment, dlqr, riccati_residual
 from companion.sim.episode import run_episode
 from companion.sim.scenario import load_scenario
+from companion.types import Pose
 
 DEFAULT_Q = (25.0, 10.0, 25.0, 30.0, 30.0)
 DEFAULT_R = (20.0, 20.0)
@@ -127,12 +125,18 @@ def radius(a_bar, b_bar, k):
     return float(np.max(np.abs(np.linalg.eigvals(a_bar - b_bar @ k))))
 
 
+def op_params(op) -> Params:
+    """The controller parameters of an operating point."""
+    return Params(dt=op["dt"], robot=RobotParams(d=op["d"]),
+                  lqr=LqrParams(q=tuple(op["q"]), r=tuple(op["r"]), rho_min=RHO_MIN,
+                                discretization=op["method"]))
+
+
 def ours(op):
-    """``(ok, K)`` from the compiled model and gain."""
-    a, b = fastlqr.augmented_model(op["chi"], op["u"], op["w"], op["d"], op["dt"],
-                                   op["method"] == "zoh", RHO_MIN)
-    k, p = np.empty((2, 5)), np.empty((5, 5))
-    return fastlqr.stabilising_gain(a, b, op["q"], op["r"], p, k), k
+    """``(ok, K)`` from the controller's model and the compiled gain."""
+    k = riccati.solve_gain(*augmented_model(op["chi"], op["u"], op["w"], op_params(op)),
+                           op["q"], op["r"])
+    return k is not None, k
 
 
 # ---------------------------------------------------------------------------------------------
@@ -167,8 +171,8 @@ def test_gain_matches_scipy(op):
     # with a Riccati residual at most 1e-8 relative, or 10x scipy's where that is larger
     # (ill-conditioned cases, where even the exact P rounded to doubles leaves ~1e-10).
     p, k_same = np.empty((5, 5)), np.empty((2, 5))
-    status, iterations = fastlqr.dare_gain_nb(a_bar, b_bar, op["q"], op["r"], p, k_same)
-    converged = status != fastlqr.GAIN_FAILED
+    status, iterations = riccati.dare_gain(a_bar, b_bar, op["q"], op["r"], p, k_same)
+    converged = status != riccati.GAIN_FAILED
     scale = max(1.0, float(np.max(np.abs(p))))
     eta = riccati_residual(a_bar, b_bar, q, r, p_ref) / max(1.0, float(np.max(np.abs(p_ref))))
     if converged:
@@ -194,22 +198,8 @@ def test_rest_point_has_no_stabilising_gain():
         assert reference_gain(*reference_model(op), op["q"], op["r"]) is None
         ok, _ = ours(op)
         assert not ok
-    with pytest.raises(np.linalg.LinAlgError):
-        fastlqr.lqr_gain(op["chi"], op["u"], op["w"], Params())
-
-
-@pytest.mark.parametrize("method", ["euler", "zoh"])
-def test_wrapper_matches_controller(method):
-    params = Params().replace(lqr=LqrParams(discretization=method, solver="scipy"))
-    controller = LqrController(params)
-    rng = np.random.default_rng(1)
-    for _ in range(20):
-        chi = np.array([rng.uniform(0.05, 5.0), rng.uniform(0, 2 * math.pi), rng.uniform(-3, 3)])
-        u = np.array([rng.uniform(-1.5, 1.5), rng.uniform(-1.5, 1.5)])
-        w = np.array([rng.uniform(0.2, 1.5), rng.uniform(-1.0, 1.0)])
-        k = fastlqr.lqr_gain(chi, u, w, params)
-        assert k.shape == (2, 5)
-        assert rel_err(k, controller.gain(chi, u, w)) <= REL_TOL
+        with pytest.raises(np.linalg.LinAlgError):
+            LqrController(op_params(op)).gain(op["chi"], op["u"], op["w"])
 
 
 def test_controller_gain_uses_the_configured_solver():
@@ -222,32 +212,6 @@ def test_controller_gain_uses_the_configured_solver():
 # ---------------------------------------------------------------------------------------------
 # The whole controller step
 # ---------------------------------------------------------------------------------------------
-
-finite = st.floats(-50.0, 50.0)
-
-
-@SETTINGS
-@given(st.floats(-1e3, 1e3))
-def test_wrap_twins_are_identical(angle):
-    assert fastlqr.wrap_pi_nb(angle) == wrap_pi(angle)
-    assert fastlqr.wrap_2pi_nb(angle) == wrap_2pi(angle)
-
-
-@SETTINGS
-@given(finite, finite, angles, finite, finite, angles, offsets)
-def test_relative_state_twin_agrees_to_rounding(rx, ry, rth, hx, hy, hth, d):
-    np.testing.assert_allclose(fastlqr.relative_state_nb(rx, ry, rth, hx, hy, hth, d),
-                               relative_state(rx, ry, rth, hx, hy, hth, d), rtol=1e-14,
-                               atol=1e-14)
-
-
-@SETTINGS
-@given(person_vs, person_omegas, st.floats(0.3, 3.0), st.floats(0.0, 2 * math.pi), offsets)
-def test_slot_reference_twin_agrees_to_rounding(v_h, omega_h, rho_d, alpha_d, d):
-    ref = slot_reference(v_h, omega_h, rho_d, alpha_d, d)
-    np.testing.assert_allclose(fastlqr.slot_reference_nb(v_h, omega_h, rho_d, alpha_d, d),
-                               (ref.beta, ref.v, ref.omega), rtol=1e-14, atol=1e-14)
-
 
 @pytest.mark.parametrize("scenario", ["figure8", "circle", "line"])
 @pytest.mark.parametrize("name", ["lqr", "lqr-paper"])
@@ -269,13 +233,10 @@ def test_compiled_controller_equals_the_scipy_controller_in_closed_loop(scenario
     assert np.ptp(logs[0]["v"]) > 0.1   # the episode exercised the controller
 
 
-def test_wrapper_rejects_unknown_discretisation():
-    params = types.SimpleNamespace(dt=0.05, robot=types.SimpleNamespace(d=0.25),
-                                   lqr=types.SimpleNamespace(discretization="tustin",
-                                                             rho_min=0.2, q=DEFAULT_Q,
-                                                             r=DEFAULT_R))
+def test_unknown_discretisation_is_named():
+    jx, ju = jacobians((1.0, 1.0, 0.0), (0.5, 0.0), (0.5, 0.0), 0.25)
     with pytest.raises(ValueError, match="tustin"):
-        fastlqr.lqr_gain((1.0, 1.0, 0.0), (0.5, 0.0), (0.5, 0.0), params)
+        discretize(jx, ju, 0.05, "tustin")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -283,38 +244,15 @@ def test_wrapper_rejects_unknown_discretisation():
 # ---------------------------------------------------------------------------------------------
 
 @SETTINGS
-@given(rhos, angles, angles, vs, omegas, person_vs, person_omegas, offsets)
-def test_jacobians_match_model(rho, alpha, beta, v, omega, v_h, omega_h, d):
-    jx, ju = fastlqr.jacobians_nb(rho, alpha, beta, v, omega, v_h, omega_h, d)
-    jx_ref, ju_ref = jacobians(np.array([rho, alpha, beta]), np.array([v, omega]),
-                               np.array([v_h, omega_h]), d)
-    for got, want in ((jx, jx_ref), (ju, ju_ref)):
-        assert got.shape == want.shape
-        np.testing.assert_allclose(got, want, rtol=0,
-                                   atol=1e-14 * max(1.0, float(np.max(np.abs(want)))))
-
-
-@SETTINGS
 @given(operating_points())
 def test_augmented_model_matches_model(op):
-    """model_euler_nb / model_zoh_nb against jacobians, discretize and augment."""
-    a, b = fastlqr.augmented_model(op["chi"], op["u"], op["w"], op["d"], op["dt"],
-                                   op["method"] == "zoh", RHO_MIN)
+    """The controller's model (Euler: compiled from model.jacobians, model.euler and
+    riccati.augmented) against jacobians, discretize and augment in Python."""
+    a, b = augmented_model(op["chi"], op["u"], op["w"], op_params(op))
     a_ref, b_ref = reference_model(op)
     scale = max(1.0, float(np.max(np.abs(a_ref))))
     np.testing.assert_allclose(a, a_ref, rtol=0, atol=1e-12 * scale)
     np.testing.assert_allclose(b, b_ref, rtol=0, atol=1e-12 * scale)
-
-
-@settings(max_examples=200, deadline=None)
-@given(st.integers(1, 7), st.floats(-8.0, 1.0), st.integers(0, 2**32 - 1))
-def test_expm_matches_scipy(n, log_scale, seed):
-    """Any size and norm (up to ~30, several squarings), against scipy.linalg.expm."""
-    from scipy.linalg import expm
-
-    x = np.random.default_rng(seed).standard_normal((n, n)) * 10.0 ** log_scale
-    want = expm(x)
-    assert rel_err(fastlqr.expm_nb(x), want) <= 1e-11
 
 
 @settings(max_examples=200, deadline=None)
@@ -332,5 +270,5 @@ def test_spectral_radius_below(n, target, skew, seed):
     for bound in (1.0 - 1e-9, 0.9):
         rad = float(np.max(np.abs(np.linalg.eigvals(m))))
         if abs(rad - bound) > 1e-9:
-            assert fastlqr.spectral_radius_below(m, bound) == (rad < bound)
-    assert not fastlqr.spectral_radius_below(np.full((n, n), np.nan), 1.0)
+            assert riccati.spectral_radius_below(m, bound) == (rad < bound)
+    assert not riccati.spectral_radius_below(np.full((n, n), np.nan), 1.0)

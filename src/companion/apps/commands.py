@@ -1,8 +1,7 @@
-"""Command-line interface: ``companion run | scenarios | convergence | pedestrians | soak |
-reproduce | tune | bench``.
+"""The commands of the ``companion`` command line (:mod:`companion.apps.cli` parses them).
 
-Bad usage or bad input files exit with code 2 and one line on stderr naming the file, line or
-key. Output files are written whole or not at all.
+Bad usage or bad input files raise :class:`~companion.errors.CompanionError` with one line naming
+the file, line or key. Output files are written whole or not at all.
 """
 
 from __future__ import annotations
@@ -12,28 +11,27 @@ import dataclasses
 import json
 import math
 import sys
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Sequence
-
-from threadpoolctl import threadpool_limits
 
 import numpy as np
-
 from tqdm import tqdm
 
-from companion import benchmark, metrics, plots, reproduce, tune
-from companion.control import CONTROLLERS, make_controller
-from companion.control.base import Pose
+from companion import metrics
+from companion.apps import benchmark, plots, reproduce, tune
+from companion.apps.pedestrians import evaluate_tracks
+from companion.config import load_toml
+from companion.control import lookup
 from companion.data import pedestrians
 from companion.errors import CompanionError
 from companion.io import save_figure, write_csv, write_json
-from companion.model import SIDES
-from companion.params import Params, params_from_mapping
-from companion.config import load_toml
+from companion.params import SIDES, Params, params_from_mapping
 from companion.sim import convergence, soak
-from companion.sim.episode import LOG_COLUMNS, TEXT_COLUMNS, Log
 from companion.sim.recorded import load_person_csv
+from companion.sim.runner import run_many
 from companion.sim.scenario import Scenario, builtin_names, load_scenario, run_scenario
+from companion.types import LOG_COLUMNS, TEXT_COLUMNS, Log, Pose
 
 
 class UsageError(CompanionError):
@@ -147,9 +145,23 @@ def output_dir(path: Path, stale: Sequence[str] = ()) -> Path:
     return path
 
 
+@contextmanager
+def progress_bar(total: int, unit: str) -> Iterator[Callable[[int], None]]:
+    """A progress bar on stderr, advanced by calling the yielded function with the number of
+    items done so far."""
+    with tqdm(total=total, unit=unit, file=sys.stderr) as bar:
+        yield lambda done: bar.update(done - bar.n)
+
+
+def workers_arg(args: argparse.Namespace) -> int | None:
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers: expected a whole number >= 1, got {args.workers}")
+    return args.workers
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     sc = build_scenario(args)
-    make_controller(sc.controller, sc.params)  # unknown names: ConfigError with a hint
+    lookup(sc.controller)  # unknown names: ConfigError with a hint
     output_dir(Path(args.out or Path("out") / sc.name))
     log = run_scenario(sc)
     m = metrics.compute(log)
@@ -191,17 +203,18 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
 
 def cmd_convergence(args: argparse.Namespace) -> int:
     params = params_arg(args)
-    if args.controller not in CONTROLLERS:
-        make_controller(args.controller, params)  # raises with a hint
     speeds = _floats(args.speeds, len(args.speeds.split(",")), "--speeds")
     if any(v < 0 for v in speeds):
         raise UsageError(f"--speeds: expected speeds >= 0 m/s, got {args.speeds!r}")
     duration = _positive(args.duration, "--duration")
+    cases = list(convergence.cases(speeds))
+    logs = run_many([convergence.episode(c, args.controller, params, duration) for c in cases],
+                    workers_arg(args))
     rows, runs, failures = [], {}, 0
     print(f"{'speed':>5} {'start':>10} {'heading':>8} {'side':>5} {'settle_s':>9} "
           f"{'min_dist_m':>10}")
-    for case in convergence.cases(speeds):
-        log, m = convergence.run_case(case, args.controller, params, duration)
+    for case, log in zip(cases, logs):
+        m = metrics.compute(log)
         settle = m["settling_time_s"]
         ok = settle is not None and settle <= args.settle_limit \
             and m["min_person_distance_m"] >= 0.5
@@ -239,9 +252,8 @@ def cmd_pedestrians(args: argparse.Namespace) -> int:
     if not tracks:
         raise UsageError("no track is fast and long enough; lower --min-speed or --min-duration")
     print(f"{len(tracks)} tracks (mean speed > {args.min_speed:g} m/s, >= "
-          f"{args.min_duration:g} s), controller {args.controller}; this takes about "
-          f"{len(tracks) // 3 + 1} s")
-    rows = pedestrians.evaluate_tracks(tracks, params, args.controller)
+          f"{args.min_duration:g} s), controller {args.controller}")
+    rows = evaluate_tracks(tracks, params, args.controller, workers=workers_arg(args))
     keys = ("scene", "ped_id", "duration_s", "mean_speed_mps", "rmse_rho_m", "rmse_alpha_rad",
             "min_person_distance_m", "finite")
     out = output_dir(Path(args.out or Path("out") / "pedestrians"))
@@ -280,19 +292,12 @@ def cmd_soak(args: argparse.Namespace) -> int:
     return 0 if ok else 1
 
 
-class OneLineParser(argparse.ArgumentParser):
-    """argparse, but usage errors are one line on stderr (exit code 2)."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(2, f"companion: error: {self.prog}: {message} (see --help)\n")
-
-
 def cmd_reproduce(args: argparse.Namespace) -> int:
     out = output_dir(Path(args.out or Path("out") / "reproduce"))
-    print(f"Reproducing Fig. 3, Table 2, Fig. 4 and Fig. 7 with {', '.join(CONTROLLERS)} "
-          f"into {out} (about 1 minute)")
-    result = reproduce.reproduce(out, progress=lambda jobs: tqdm(jobs, unit="run",
-                                                                 file=sys.stderr))
+    names = reproduce.controllers()
+    print(f"Reproducing Fig. 3, Table 2, Fig. 4 and Fig. 7 with {', '.join(names)} into {out}")
+    with progress_bar(reproduce.episode_count(), "episode") as progress:
+        result = reproduce.reproduce(out, workers_arg(args), progress)
     print(reproduce.fig3_summary(result.fig3))
     print("Table 2 (ours; paper's LQR/PID/VSM/IC rho and alpha at the right):")
     print(reproduce.table2_text(result.table2))
@@ -308,8 +313,10 @@ def cmd_tune(args: argparse.Namespace) -> int:
         raise UsageError(f"--budget: expected a whole number >= 1, got {args.budget}")
     print(f"tuning {args.controller}: {args.budget} candidates, seed {args.seed}, "
           f"scenarios {', '.join(c.name for c in tune.tuning_scenarios())}")
-    result = tune.tune(args.controller, params, args.budget, args.seed,
-                       progress=lambda it: tqdm(it, unit="candidate", file=sys.stderr))
+    cases = len(tune.tuning_scenarios())
+    with progress_bar(args.budget * cases, "episode") as progress:
+        result = tune.tune(args.controller, params, args.budget, args.seed,
+                           workers_arg(args), progress)
     print(f"J: current gains {result.start_score:.4f}, best {result.best_score:.4f}")
     for dim, value in zip(result.dims, result.best):
         print(f"  {dim.name} = {value:.4g}")
@@ -319,10 +326,8 @@ def cmd_tune(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     if args.episodes < 1:
         raise UsageError(f"--episodes: expected a whole number >= 1, got {args.episodes}")
-    if args.workers is not None and args.workers < 1:
-        raise UsageError(f"--workers: expected a whole number >= 1, got {args.workers}")
     duration = _positive(args.duration, "--duration")
-    result = benchmark.run(args.episodes, duration, args.workers, not args.no_compile_time,
+    result = benchmark.run(args.episodes, duration, workers_arg(args), not args.no_first_step,
                            progress=lambda msg: print(f"bench: {msg}", file=sys.stderr))
     if args.json:
         print(json.dumps(result, indent=2, allow_nan=False))
@@ -333,114 +338,3 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
-def parser() -> argparse.ArgumentParser:
-    ap = OneLineParser(prog="companion",
-                       description="Side-by-side companion robot control (LQR).")
-    sub = ap.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
-
-    run = sub.add_parser("run", help="simulate one scenario and write log.csv, metrics.json")
-    run.add_argument("scenario", help="built-in scenario name (see 'companion scenarios') "
-                                      "or a TOML file")
-    run.add_argument("--controller", choices=sorted(CONTROLLERS),
-                     help="controller (default: the scenario's)")
-    run.add_argument("--side", choices=sorted(SIDES), help="side of the person to walk on")
-    run.add_argument("--bearing", metavar="RAD", help="desired bearing alpha_d in rad "
-                     "(left pi/2, behind pi, right 3pi/2)")
-    run.add_argument("--distance", metavar="M", help="desired distance rho_d in m")
-    run.add_argument("--start", metavar="X,Y,THETA", help="robot start pose (m, m, rad); "
-                     "default: in the slot. Write --start=-1,2,0 when X is negative")
-    run.add_argument("--person-csv", metavar="FILE", help="CSV with header t,x,y replacing "
-                     "the scenario's person motion (duration: the recording's)")
-    run.add_argument("--duration", metavar="S", help="simulated time in s")
-    run.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides "
-                     "(docs/parameters.md)")
-    run.add_argument("--obstacles", choices=("truth", "lidar"),
-                     help="the controller knows the obstacles exactly (truth) or sees what "
-                          "the simulated LiDAR detects (lidar); default: the scenario's")
-    run.add_argument("--out", metavar="DIR", help="output folder (default out/SCENARIO)")
-    run.add_argument("--plot", action="store_true", help="also write trajectory.png, "
-                     "errors.png, inputs.png (and avoidance.png when there are obstacles)")
-    run.set_defaults(func=cmd_run)
-
-    rp = sub.add_parser("reproduce", help="the paper's Fig. 3, Table 2, Fig. 4 and Fig. 7")
-    rp.add_argument("--out", metavar="DIR", help="output folder (default out/reproduce)")
-    rp.set_defaults(func=cmd_reproduce)
-
-    tn = sub.add_parser("tune", help="tune a controller's gains (docs/baselines.md)")
-    tn.add_argument("controller", choices=sorted(tune.SPACES))
-    tn.add_argument("--budget", type=int, default=64, help="candidates (default 64)")
-    tn.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    tn.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
-    tn.set_defaults(func=cmd_tune)
-
-    sc = sub.add_parser("scenarios", help="list the built-in scenarios")
-    sc.set_defaults(func=cmd_scenarios)
-
-    cv = sub.add_parser("convergence", help="Fig. 3: 48 starts, settling and safety table")
-    cv.add_argument("--controller", default="lqr", choices=sorted(CONTROLLERS))
-    cv.add_argument("--speeds", default="0.5,1.0", metavar="V1,V2",
-                    help="person speeds in m/s (default 0.5,1.0)")
-    cv.add_argument("--duration", default="30", metavar="S", help="simulated time per run")
-    cv.add_argument("--settle-limit", type=float, default=20.0, metavar="S",
-                    help="a run must settle within this time (default 20 s)")
-    cv.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
-    cv.add_argument("--out", metavar="DIR", help="output folder (default out/convergence)")
-    cv.add_argument("--plot", action="store_true", help="write the Fig. 3 panels as PNG")
-    cv.set_defaults(func=cmd_convergence)
-
-    pd = sub.add_parser("pedestrians", help="our controller beside real walkers (ETH/UCY)")
-    pd.add_argument("--data", metavar="DIR", help="folder of the ETH/UCY files (default: "
-                    "../shared/data/pedestrians or $COMPANION_PEDESTRIANS)")
-    pd.add_argument("--controller", default="lqr", choices=sorted(CONTROLLERS))
-    pd.add_argument("--side", choices=sorted(SIDES), help="side (default: left)")
-    pd.add_argument("--min-speed", type=float, default=0.6, metavar="MPS",
-                    help="only tracks with a higher mean speed (default 0.6 m/s)")
-    pd.add_argument("--min-duration", type=float, default=15.0, metavar="S",
-                    help="only tracks at least this long (default 15 s)")
-    pd.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
-    pd.add_argument("--out", metavar="DIR", help="output folder (default out/pedestrians)")
-    pd.set_defaults(func=cmd_pedestrians)
-
-    sk = sub.add_parser("soak", help="long run of a random walker among obstacles "
-                        "(docs/safety.md); exit 1 on a collision or a non-finite value")
-    sk.add_argument("--duration", default="3600", metavar="S",
-                    help="simulated time in s (default 3600)")
-    sk.add_argument("--seed", type=int, default=0, help="world and walk seed (default 0)")
-    sk.add_argument("--controller", default="lqr", choices=sorted(CONTROLLERS))
-    sk.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
-    sk.add_argument("--log", action="store_true", help="also write log.csv")
-    sk.add_argument("--out", metavar="DIR", help="output folder (default out/soak)")
-    sk.set_defaults(func=cmd_soak)
-
-    bn = sub.add_parser("bench", help="step latency per controller, the scipy reference, "
-                        "batch throughput and memory (docs/performance.md)")
-    bn.add_argument("--json", action="store_true", help="print the figures as JSON")
-    bn.add_argument("--episodes", type=int, default=1000,
-                    help="figure-8 episodes in the batch measurement (default 1000)")
-    bn.add_argument("--duration", default="60", metavar="S",
-                    help="simulated time per episode in s (default 60)")
-    bn.add_argument("--workers", type=int, help="threads of the compiled batch and worker "
-                    "processes of the stack batch (default: one per CPU)")
-    bn.add_argument("--no-compile-time", action="store_true",
-                    help="skip the fresh-process compile and warm-up measurement")
-    bn.add_argument("--out", metavar="FILE", help="also write the JSON figures to FILE")
-    bn.set_defaults(func=cmd_bench)
-    return ap
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    ap = parser()
-    args = ap.parse_args(argv)
-    try:
-        # The controller's matrices are 5x5: BLAS threads only cost hand-over time.
-        with threadpool_limits(limits=1):
-            return args.func(args)
-    except CompanionError as exc:
-        print(f"companion: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return 130
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -7,16 +7,18 @@ ours for comparison (:data:`PAPER_TABLE2`, in the paper's units).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterable, Sequence
 
-from companion import metrics, plots
+from companion import metrics
+from companion.apps import plots
 from companion.control import CONTROLLERS
 from companion.io import save_figure, write_csv, write_text
 from companion.params import Params
 from companion.sim import convergence
-from companion.sim.scenario import load_scenario, run_scenario
+from companion.sim.runner import run_many
+from companion.sim.scenario import load_scenario
 
 #: Table 2 trajectory name -> built-in scenario.
 TRAJECTORIES = {"Linear": "line", "8-shaped": "figure8", "Circle": "circle"}
@@ -62,12 +64,6 @@ def controllers() -> list[str]:
     return list(CONTROLLERS)
 
 
-def table2_row(trajectory: str, controller: str) -> Table2Row:
-    """One Table 2 cell row: the trajectory's scenario, robot starting in its slot."""
-    sc = load_scenario(TRAJECTORIES[trajectory])
-    return Table2Row(trajectory, controller, metrics.compute(run_scenario(sc, controller)))
-
-
 def table2_markdown(rows: Sequence[Table2Row]) -> str:
     """Table 2 in the paper's units, with the paper's published values beside ours."""
     lines = [
@@ -106,7 +102,7 @@ def table2_text(rows: Sequence[Table2Row]) -> str:
     return "\n".join(out)
 
 
-Progress = Callable[[Iterable], Iterable]
+Progress = Callable[[int], None]
 
 
 @dataclass(frozen=True)
@@ -118,26 +114,33 @@ class Reproduction:
     fig4: list[list]
 
 
-def reproduce(out: Path, progress: Progress = lambda it: it) -> Reproduction:
-    """Run Fig. 3, Table 2, Fig. 4 and Fig. 7 and write their files into ``out``."""
+def episode_count() -> int:
+    """Episodes :func:`reproduce` runs: Fig. 3, Table 2, Fig. 4 and Fig. 7."""
     names = controllers()
-    jobs: list[tuple[str, object]] = [("fig3", case) for case in convergence.cases()]
-    jobs += [("table2", (traj, ctl)) for traj in TRAJECTORIES for ctl in names]
-    jobs += [("fig4", ctl) for ctl in names] + [("fig7", "lqr")]
+    return len(list(convergence.cases())) + len(TRAJECTORIES) * len(names) + len(names) + 1
+
+
+def reproduce(out: Path, workers: int | None = None, progress: Progress | None = None
+              ) -> Reproduction:
+    """Run Fig. 3, Table 2, Fig. 4 and Fig. 7 (every episode through the runner, in
+    ``workers`` processes) and write their files into ``out``."""
+    names = controllers()
+    cases = list(convergence.cases())
+    table2_jobs = [(traj, ctl) for traj in TRAJECTORIES for ctl in names]
+    fig4, fig7 = load_scenario("fig4"), load_scenario("fig7")
+    specs = [convergence.episode(case, "lqr", Params()) for case in cases]
+    specs += [load_scenario(TRAJECTORIES[traj]).episode(ctl) for traj, ctl in table2_jobs]
+    specs += [fig4.episode(ctl) for ctl in names] + [fig7.episode("lqr")]
+    logs = iter(run_many(specs, workers, progress=progress))
     fig3_runs: dict[float, list] = {}
-    fig3_rows, rows, fig4_runs = [], [], {}
-    fig7_log = None
-    for kind, job in progress(jobs):
-        if kind == "fig3":
-            log, m = convergence.run_case(job, "lqr", Params())
-            fig3_runs.setdefault(job.speed, []).append((job.label, job.side, log))
-            fig3_rows.append(convergence.csv_row(job, m))
-        elif kind == "table2":
-            rows.append(table2_row(*job))
-        elif kind == "fig4":
-            fig4_runs[job] = run_scenario(load_scenario("fig4"), job)
-        else:
-            fig7_log = run_scenario(load_scenario("fig7"), job)
+    fig3_rows = []
+    for case, log in zip(cases, logs):
+        fig3_runs.setdefault(case.speed, []).append((case.label, case.side, log))
+        fig3_rows.append(convergence.csv_row(case, metrics.compute(log)))
+    rows = [Table2Row(traj, ctl, metrics.compute(log)) for (traj, ctl), log
+            in zip(table2_jobs, logs)]
+    fig4_runs = {ctl: log for ctl, log in zip(names, logs)}
+    fig7_log = next(logs)
     write_csv(out / "fig3.csv", convergence.CSV_COLUMNS, fig3_rows)
     for speed, runs in fig3_runs.items():
         _save(plots.convergence(runs, f"Fig. 3: person at {speed:g} m/s (lqr)"),

@@ -1,38 +1,43 @@
-"""Augmented-state discrete LQR of the companion controller (paper Sec. 3.2, Eq. 11-15).
-
-The augmented state is ``xi = [chi_e; u_e(k-1)]`` and the decision variable is the input
-increment ``du = u_e(k) - u_e(k-1)``:
-
-    xi(k+1) = A_bar xi(k) + B_bar du(k),   A_bar = [[A, B], [0, I]],   B_bar = [[B], [I]]
-
-(NOTES.md point 4 for the printed dimension slips). The gain minimises
-``sum xi' Q xi + du' R du`` and comes from the discrete algebraic Riccati equation (Eq. 15).
-"""
+"""Reference solution of the LQR problem by scipy (``solve_discrete_are``), with input checks
+that name the offending matrix, and the augmentation of Eq. (12)."""
 
 from __future__ import annotations
 
 import numpy as np
 from scipy.linalg import solve_discrete_are
 
+from companion._jit import jitable
+
+#: Closed-loop spectral radius must be below 1 - RADIUS_MARGIN (both solvers).
+RADIUS_MARGIN = 1e-9
+
 
 def augment(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Build ``(A_bar, B_bar)`` of Eq. (12) from the discrete model ``(A, B)``.
-
-    Parameters
-    ----------
-    a : ndarray, shape (n, n)
-    b : ndarray, shape (n, m)
-    """
+    """``(A_bar, B_bar)`` of Eq. (12), ``[[A, B], [0, I]]`` and ``[[B], [I]]``, from the
+    discrete model ``a`` (n, n), ``b`` (n, m): the state is augmented with the last input."""
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
     n, m = _shape_of_b(b, "augment")
     if a.shape != (n, n):
         raise ValueError(f"augment: A must be ({n}, {n}) to match B {b.shape}, got {a.shape}")
+    return augmented(a, b)
+
+
+@jitable
+def augmented(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`augment` without the input checks (also called from compiled kernels)."""
+    n, m = b.shape
     a_bar = np.zeros((n + m, n + m))
-    a_bar[:n, :n] = a
-    a_bar[:n, n:] = b
-    a_bar[n:, n:] = np.eye(m)
-    b_bar = np.vstack([b, np.eye(m)])
+    b_bar = np.zeros((n + m, m))
+    for i in range(n):
+        for j in range(n):
+            a_bar[i, j] = a[i, j]
+        for j in range(m):
+            a_bar[i, n + j] = b[i, j]
+            b_bar[i, j] = b[i, j]
+    for i in range(m):
+        a_bar[n + i, n + i] = 1.0
+        b_bar[n + i, i] = 1.0
     return a_bar, b_bar
 
 
@@ -59,7 +64,7 @@ def _check_weights(q: np.ndarray, r: np.ndarray, nx: int, nu: int) -> None:
 
 def dlqr(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray, check: bool = True
          ) -> tuple[np.ndarray, np.ndarray]:
-    """Discrete LQR gain ``K = (R + B'PB)^-1 B'PA`` (Eq. 14) and Riccati solution ``P`` (Eq. 15).
+    """Discrete LQR gain ``K`` (Eq. 14) and Riccati solution ``P`` (Eq. 15) by scipy.
 
     Parameters
     ----------
@@ -68,23 +73,22 @@ def dlqr(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray, check: bool
     q : ndarray, shape (n, n), symmetric positive semi-definite
     r : ndarray, shape (m, m), symmetric positive definite
     check : bool
-        Validate shapes and weights (skip only in a hot loop whose inputs were checked once).
+        Validate shapes and weights (skip only where the inputs were checked once).
 
     Returns
     -------
     k : ndarray, shape (m, n)
         Optimal gain; the control law is ``u = -K x``.
     p : ndarray, shape (n, n)
-        Stabilising solution of the discrete algebraic Riccati equation.
+        Stabilising solution of the Riccati equation.
 
     Raises
     ------
     ValueError
-        If a matrix has the wrong shape or sign.
+        If a matrix has the wrong shape or sign; the message names it.
     numpy.linalg.LinAlgError
-        If no stabilising solution exists (for example an uncontrollable mode on or outside
-        the unit circle): the closed loop ``A - BK`` is checked, since the Riccati solver does
-        not always detect this.
+        If no stabilising solution exists (the closed loop ``A - BK`` is checked, since the
+        Riccati solver does not always detect this).
     """
     if check:
         a = np.asarray(a, dtype=float)
@@ -99,7 +103,7 @@ def dlqr(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray, check: bool
     bt_p = b.T @ p
     k = np.linalg.solve(r + bt_p @ b, bt_p @ a)
     radius = np.max(np.abs(np.linalg.eigvals(a - b @ k)))
-    if not radius < 1.0 - 1e-9:
+    if not radius < 1.0 - RADIUS_MARGIN:
         raise np.linalg.LinAlgError(
             f"dlqr: no stabilising solution (closed-loop spectral radius {radius:.12g})")
     return k, p

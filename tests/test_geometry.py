@@ -1,14 +1,10 @@
-"""Property tests of the unicycle kinematics and angle helpers (paper Eq. 1-2).
+"""Property tests of the geometry: angles, the unicycle (paper Eq. 1-2) and obstacle clearance.
 
 Mathematical properties only (ranges, congruences, agreement with an independent numerical
 integration of Eq. 1, the semigroup property), no stored numbers.
 """
 
 from __future__ import annotations
-
-
-# Small matrices: OpenBLAS threading only adds overhead, and on a loaded machine it makes
-# expm / solve_discrete_are ~100x slower. Effective only if numpy is not imported yet.
 
 import math
 
@@ -18,7 +14,19 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
-from companion.kinematics import TWO_PI, offset_point, unicycle_step, wrap_2pi, wrap_pi
+from companion.geometry import (
+    TWO_PI,
+    clearance,
+    min_clearance,
+    obstacle_arrays,
+    offset_point,
+    path_clearance,
+    unicycle_step,
+    wrap_2pi,
+    wrap_pi,
+    wrap_pi_array,
+)
+from companion.types import Circle, Wall
 
 SETTINGS = settings(max_examples=150, deadline=None)
 
@@ -108,7 +116,14 @@ def test_wraps_agree_and_idempotent(angle):
     assert wrap_pi(a) == pytest.approx(a, abs=4 * math.ulp(math.pi))
 
 
+@SETTINGS
+@given(st.lists(angles, min_size=1, max_size=20))
+def test_array_wrap_is_the_scalar_wrap(values):
+    assert wrap_pi_array(np.array(values)).tolist() == [wrap_pi(a) for a in values]
+
+
 def test_wrap_boundaries():
+    assert wrap_pi_array(np.array([-math.pi, math.pi])).tolist() == [math.pi, math.pi]
     assert wrap_pi(math.pi) == math.pi
     assert wrap_pi(-math.pi) == math.pi          # (-pi, pi]: -pi maps to +pi
     assert wrap_pi(3 * math.pi) == pytest.approx(math.pi)
@@ -238,3 +253,26 @@ def test_offset_point_velocity(x, y, theta, v, omega, d):
     c, s = math.cos(theta), math.sin(theta)
     expected = (v * c - d * omega * s, v * s + d * omega * c)
     np.testing.assert_allclose(vel, expected, rtol=0, atol=1e-7)
+
+
+# --------------------------------------------------------------------------- clearance
+
+def test_clearance_of_circles_and_walls():
+    assert clearance(Circle(1.0, 0.0, 0.5), 0.0, 0.0, 0.25) == pytest.approx(0.25)
+    assert clearance(Wall(3.0, 1.0, 5.0, 1.0), 3.0, 0.0, 0.25) == pytest.approx(0.75)
+    assert clearance(Wall(3.0, 1.0, 5.0, 1.0), 0.0, 1.0) == pytest.approx(3.0)   # end point
+    assert clearance(Circle(0.0, 0.0, 0.5), 0.0, 0.0) == pytest.approx(-0.5)     # inside
+
+
+@SETTINGS
+@given(st.floats(-5, 5), st.floats(-5, 5),
+       st.lists(st.tuples(st.floats(-3, 3), st.floats(-3, 3), st.floats(0, 1)), max_size=3),
+       st.lists(st.tuples(*[st.floats(-3, 3)] * 4), max_size=3), st.floats(0, 0.5))
+def test_min_clearance_is_the_smallest_clearance(x, y, circles, walls, footprint):
+    obstacles = [Circle(*c) for c in circles] + [Wall(*w) for w in walls]
+    want = min((clearance(o, x, y, footprint) for o in obstacles), default=math.inf)
+    arrays = obstacle_arrays(obstacles)
+    assert min_clearance(x, y, arrays, footprint) == want
+    far = min_clearance(x + 10.0, y, arrays, footprint)
+    assert path_clearance(np.array([x, x + 10.0]), np.array([y, y]), arrays,
+                          footprint) == pytest.approx(min(want, far), abs=1e-12)

@@ -17,17 +17,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
 from companion import metrics
-from companion.control import make_controller
-from companion.control.base import Pose
 from companion.params import Params
-from companion.sim.episode import run_episode
 from companion.sim.person import PersonMotion, Segment, SegmentPath, circle, line
+from companion.sim.runner import EpisodeSpec, run_many
+from companion.types import Pose
 
 
 @dataclass(frozen=True)
@@ -107,20 +106,29 @@ def current(params: Params, dims: Sequence[Dim]) -> list[float]:
     return out
 
 
-def score(controller: str, params: Params, cases: Sequence[TuningCase]) -> float:
+def episodes(controller: str, params: Params, cases: Sequence[TuningCase]
+             ) -> list[EpisodeSpec]:
+    """The runner's episodes of ``params`` on the tuning cases."""
+    return [EpisodeSpec(controller, case.person,
+                        dataclasses.replace(params, formation=dataclasses.replace(
+                            params.formation, bearing=case.bearing)),
+                        case.duration, start=case.start) for case in cases]
+
+
+def case_score(m: dict) -> float:
+    """One case's term of J from its metrics: the normalised RMSE, plus 100 if the robot came
+    closer than 0.5 m to the person or a value was not finite."""
+    j = m["rmse_rho_m"] / 0.05 + m["rmse_alpha_rad"] / 0.05
+    if not m["finite"] or not math.isfinite(j) or m["min_person_distance_m"] < 0.5:
+        j = 100.0 + (j if math.isfinite(j) else 0.0)
+    return j
+
+
+def score(controller: str, params: Params, cases: Sequence[TuningCase],
+          workers: int | None = 1) -> float:
     """The tuning objective J (module docstring) of ``params`` for ``controller``."""
-    total = 0.0
-    for case in cases:
-        p = dataclasses.replace(params, formation=dataclasses.replace(params.formation,
-                                                                      bearing=case.bearing))
-        log = run_episode(make_controller(controller, p), case.person, p, case.duration,
-                          start=case.start)
-        m = metrics.compute(log)
-        j = m["rmse_rho_m"] / 0.05 + m["rmse_alpha_rad"] / 0.05
-        if not m["finite"] or not math.isfinite(j) or m["min_person_distance_m"] < 0.5:
-            j = 100.0 + (j if math.isfinite(j) else 0.0)
-        total += j
-    return total / len(cases)
+    results = run_many(episodes(controller, params, cases), workers, summarize=metrics.compute)
+    return sum(case_score(m) for m in results) / len(cases)
 
 
 @dataclass(frozen=True)
@@ -134,8 +142,10 @@ class TuneResult:
 
 
 def tune(controller: str, params: Params = Params(), budget: int = 64, seed: int = 0,
-         progress: Callable[[Iterable], Iterable] = lambda it: it) -> TuneResult:
-    """Seeded random search (module docstring) with ``budget`` candidates."""
+         workers: int | None = None, progress: Callable[[int], None] | None = None
+         ) -> TuneResult:
+    """Seeded random search (module docstring) with ``budget`` candidates, every episode
+    through the runner in ``workers`` processes (``progress``: episodes done)."""
     dims = SPACES[controller]
     cases = tuning_scenarios()
     rng = np.random.default_rng(seed)
@@ -143,7 +153,12 @@ def tune(controller: str, params: Params = Params(), budget: int = 64, seed: int
     highs = np.log([d.high for d in dims])
     candidates = [current(params, dims)] + [list(np.exp(rng.uniform(lows, highs)))
                                             for _ in range(budget - 1)]
-    scores = [score(controller, apply(params, dims, c), cases) for c in progress(candidates)]
+    specs = [spec for c in candidates
+             for spec in episodes(controller, apply(params, dims, c), cases)]
+    results = run_many(specs, workers, summarize=metrics.compute, progress=progress)
+    n = len(cases)
+    scores = [sum(case_score(m) for m in results[i:i + n]) / n
+              for i in range(0, len(results), n)]
     best = int(np.argmin(scores))
     return TuneResult(controller, dims, tuple(candidates[best]), scores[best], scores[0],
                       budget)

@@ -2,22 +2,20 @@
 
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle as Circle2D
 
-from matplotlib.patches import Circle as Circle2D  # noqa: E402
-
-from companion.control.avoidance import influence_range  # noqa: E402
-from companion.metrics import errors  # noqa: E402
-from companion.obstacles import Circle, Obstacle  # noqa: E402
-from companion.params import AvoidanceParams, Params  # noqa: E402
-from companion.sim.episode import Log  # noqa: E402
+from companion.control.avoidance import influence_range
+from companion.metrics import errors
+from companion.params import AvoidanceParams, Params
+from companion.types import Circle, Log, Obstacle
 
 PERSON = "tab:red"
 ROBOT = "tab:purple"

@@ -1,0 +1,100 @@
+"""numba in one place: the two decorators the package uses and where compiled code is cached.
+
+* :func:`jitable`: a plain Python function that compiled kernels may call; Python callers
+  get the plain function (``numba.extending.register_jitable``).
+* :func:`kernel`: the compiled version of a plain function, ``njit(cache=True)`` with
+  ``error_model="numpy"`` (a division by zero gives inf/nan instead of raising).
+
+So every compiled kernel is compiled from the same Python source that tests run directly.
+
+numba checks a cached kernel against its own source file only, and a kernel inlines the
+jitable functions of other modules, so a change to those would leave a stale kernel. The
+cache therefore lives in a directory named after a hash of every source file of the package
+(docs/performance.md): ``$NUMBA_CACHE_DIR`` if set, else ``__pycache__/numba/<hash>`` inside
+the package, else (package not writable) the system's temporary directory. Importing
+companion sets numba's cache directory for the whole process and its children.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+from numba import njit
+from numba.extending import register_jitable
+
+PACKAGE = Path(__file__).resolve().parent
+_JIT_OPTIONS = {"cache": True, "error_model": "numpy"}
+
+
+def jitable(func):
+    """Mark a plain function as callable from compiled kernels; returns it unchanged."""
+    return register_jitable(**_JIT_OPTIONS)(func)
+
+
+def kernel(func):
+    """``func`` compiled with numba (cached, numpy error model); ``func`` stays as it is."""
+    return njit(**_JIT_OPTIONS)(func)
+
+
+def source_digest(root: Path = PACKAGE) -> str:
+    """SHA-1 (12 hex digits) of the paths and contents of every ``.py`` file under ``root``."""
+    h = hashlib.sha1()
+    for path in sorted(root.rglob("*.py")):
+        h.update(str(path.relative_to(root)).encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()[:12]
+
+
+@functools.lru_cache(maxsize=1)
+def _package_digest() -> str:
+    return source_digest()
+
+
+def _writable(path: Path) -> bool:
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / ".write-test"
+        probe.write_bytes(b"")
+        probe.unlink()
+        return True
+    except OSError:
+        return False
+
+
+def cache_dir() -> Path:
+    """The cache directory for the current sources (see the module docstring); a
+    ``NUMBA_CACHE_DIR`` that already ends in the digest (set by a parent process) is kept."""
+    digest = _package_digest()
+    base = os.environ.get("NUMBA_CACHE_DIR")
+    if base:
+        return Path(base) if Path(base).name == digest else Path(base) / digest
+    local = PACKAGE / "__pycache__" / "numba"
+    if _writable(local):
+        return local / digest
+    return Path(tempfile.gettempdir()) / f"companion-numba-{os.getuid()}" / digest
+
+
+def prune(path: Path) -> None:
+    """Remove the caches of older sources beside ``path`` in the package's own folder."""
+    if path.parent != PACKAGE / "__pycache__" / "numba":
+        return
+    for old in path.parent.iterdir():
+        if old != path and old.is_dir():
+            shutil.rmtree(old, ignore_errors=True)
+
+
+def install() -> None:
+    """Point numba's cache at :func:`cache_dir` (before any kernel is defined)."""
+    path = cache_dir()
+    if not _writable(path):
+        return
+    prune(path)
+    os.environ["NUMBA_CACHE_DIR"] = str(path)
+    import numba.core.config
+
+    numba.core.config.CACHE_DIR = str(path)

@@ -1,0 +1,156 @@
+"""Command-line interface: ``companion run | scenarios | convergence | pedestrians | soak |
+reproduce | tune | bench`` (the commands are in :mod:`companion.apps.commands`).
+
+Bad usage or bad input files exit with code 2 and one line on stderr naming the file, line or
+key. Output files are written whole or not at all. Output cut short by the reader (``| head``)
+ends quietly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Sequence
+
+from threadpoolctl import threadpool_limits
+
+from companion.apps import commands as c
+from companion.apps.tune import SPACES
+from companion.control import CONTROLLERS
+from companion.errors import CompanionError
+from companion.params import SIDES
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """argparse, but usage errors are one line on stderr (exit code 2)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"companion: error: {self.prog}: {message} (see --help)\n")
+
+
+def _workers(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="worker processes for the episodes (default: one per CPU)")
+
+
+def parser() -> argparse.ArgumentParser:
+    ap = OneLineParser(prog="companion",
+                       description="Side-by-side companion robot control (LQR).")
+    sub = ap.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
+
+    run = sub.add_parser("run", help="simulate one scenario and write log.csv, metrics.json")
+    run.add_argument("scenario", help="built-in scenario name (see 'companion scenarios') "
+                                      "or a TOML file")
+    run.add_argument("--controller", choices=sorted(CONTROLLERS),
+                     help="controller (default: the scenario's)")
+    run.add_argument("--side", choices=sorted(SIDES), help="side of the person to walk on")
+    run.add_argument("--bearing", metavar="RAD", help="desired bearing alpha_d in rad "
+                     "(left pi/2, behind pi, right 3pi/2)")
+    run.add_argument("--distance", metavar="M", help="desired distance rho_d in m")
+    run.add_argument("--start", metavar="X,Y,THETA", help="robot start pose (m, m, rad); "
+                     "default: in the slot. Write --start=-1,2,0 when X is negative")
+    run.add_argument("--person-csv", metavar="FILE", help="CSV with header t,x,y replacing "
+                     "the scenario's person motion (duration: the recording's)")
+    run.add_argument("--duration", metavar="S", help="simulated time in s")
+    run.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides "
+                     "(docs/parameters.md)")
+    run.add_argument("--obstacles", choices=("truth", "lidar"),
+                     help="the controller knows the obstacles exactly (truth) or sees what "
+                          "the simulated LiDAR detects (lidar); default: the scenario's")
+    run.add_argument("--out", metavar="DIR", help="output folder (default out/SCENARIO)")
+    run.add_argument("--plot", action="store_true", help="also write trajectory.png, "
+                     "errors.png, inputs.png (and avoidance.png when there are obstacles)")
+    run.set_defaults(func=c.cmd_run)
+
+    rp = sub.add_parser("reproduce", help="the paper's Fig. 3, Table 2, Fig. 4 and Fig. 7")
+    rp.add_argument("--out", metavar="DIR", help="output folder (default out/reproduce)")
+    _workers(rp)
+    rp.set_defaults(func=c.cmd_reproduce)
+
+    tn = sub.add_parser("tune", help="tune a controller's gains (docs/baselines.md)")
+    tn.add_argument("controller", choices=sorted(SPACES))
+    tn.add_argument("--budget", type=int, default=64, help="candidates (default 64)")
+    tn.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    tn.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
+    _workers(tn)
+    tn.set_defaults(func=c.cmd_tune)
+
+    sc = sub.add_parser("scenarios", help="list the built-in scenarios")
+    sc.set_defaults(func=c.cmd_scenarios)
+
+    cv = sub.add_parser("convergence", help="Fig. 3: 48 starts, settling and safety table")
+    cv.add_argument("--controller", default="lqr", choices=sorted(CONTROLLERS))
+    cv.add_argument("--speeds", default="0.5,1.0", metavar="V1,V2",
+                    help="person speeds in m/s (default 0.5,1.0)")
+    cv.add_argument("--duration", default="30", metavar="S", help="simulated time per run")
+    cv.add_argument("--settle-limit", type=float, default=20.0, metavar="S",
+                    help="a run must settle within this time (default 20 s)")
+    cv.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
+    cv.add_argument("--out", metavar="DIR", help="output folder (default out/convergence)")
+    cv.add_argument("--plot", action="store_true", help="write the Fig. 3 panels as PNG")
+    _workers(cv)
+    cv.set_defaults(func=c.cmd_convergence)
+
+    pd = sub.add_parser("pedestrians", help="our controller beside real walkers (ETH/UCY)")
+    pd.add_argument("--data", metavar="DIR", help="folder of the ETH/UCY files (default: "
+                    "../shared/data/pedestrians or $COMPANION_PEDESTRIANS)")
+    pd.add_argument("--controller", default="lqr", choices=sorted(CONTROLLERS))
+    pd.add_argument("--side", choices=sorted(SIDES), help="side (default: left)")
+    pd.add_argument("--min-speed", type=float, default=0.6, metavar="MPS",
+                    help="only tracks with a higher mean speed (default 0.6 m/s)")
+    pd.add_argument("--min-duration", type=float, default=15.0, metavar="S",
+                    help="only tracks at least this long (default 15 s)")
+    pd.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
+    pd.add_argument("--out", metavar="DIR", help="output folder (default out/pedestrians)")
+    _workers(pd)
+    pd.set_defaults(func=c.cmd_pedestrians)
+
+    sk = sub.add_parser("soak", help="long run of a random walker among obstacles "
+                        "(docs/safety.md); exit 1 on a collision or a non-finite value")
+    sk.add_argument("--duration", default="3600", metavar="S",
+                    help="simulated time in s (default 3600)")
+    sk.add_argument("--seed", type=int, default=0, help="world and walk seed (default 0)")
+    sk.add_argument("--controller", default="lqr", choices=sorted(CONTROLLERS))
+    sk.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
+    sk.add_argument("--log", action="store_true", help="also write log.csv")
+    sk.add_argument("--out", metavar="DIR", help="output folder (default out/soak)")
+    sk.set_defaults(func=c.cmd_soak)
+
+    bn = sub.add_parser("bench", help="step latency per controller alone and in the full "
+                        "stack, full-stack throughput, first-step time and memory "
+                        "(docs/performance.md)")
+    bn.add_argument("--json", action="store_true", help="print the figures as JSON")
+    bn.add_argument("--episodes", type=int, default=16,
+                    help="figure-8 episodes in the throughput measurement (default 16)")
+    bn.add_argument("--duration", default="60", metavar="S",
+                    help="simulated time per episode in s (default 60)")
+    bn.add_argument("--no-first-step", action="store_true",
+                    help="skip the fresh-process first-step measurement (numba compile)")
+    bn.add_argument("--out", metavar="FILE", help="also write the JSON figures to FILE")
+    _workers(bn)
+    bn.set_defaults(func=c.cmd_bench)
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = parser()
+    args = ap.parse_args(argv)
+    try:
+        # The controller's matrices are 5x5: BLAS threads only cost hand-over time.
+        with threadpool_limits(limits=1):
+            return args.func(args)
+    except CompanionError as exc:
+        print(f"companion: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+    except BrokenPipeError:
+        # The reader went away (``companion run ... | head``): stop quietly, and keep Python
+        # from failing again when it flushes stdout at exit.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

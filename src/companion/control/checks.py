@@ -1,0 +1,90 @@
+"""Checks of raw data for the safety supervisor: the clock, the robot pose, obstacles and LiDAR
+scans (docs/safety.md, faults 2, 4 and 7)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from companion.geometry import clearance
+from companion.params import Params
+from companion.types import Circle, Obstacle, Pose, Scan
+
+
+def finite(*values: float) -> bool:
+    return all(math.isfinite(x) for x in values)
+
+
+def pose_is_finite(pose: Pose) -> bool:
+    return finite(pose.x, pose.y, pose.theta)
+
+
+def obstacle_is_finite(ob: Obstacle) -> bool:
+    """All fields finite (an unset ``influence`` is fine), a circle's radius >= 0."""
+    influence = () if ob.influence is None else (ob.influence,)
+    if isinstance(ob, Circle):
+        return finite(ob.x, ob.y, ob.radius, *influence) and ob.radius >= 0.0
+    return finite(ob.x0, ob.y0, ob.x1, ob.y1, *influence)
+
+
+def obstacle_inside(robot: Pose, obstacles: Sequence[Obstacle], radius: float) -> bool:
+    """An obstacle overlaps the footprint of ``radius`` around a finite robot pose."""
+    return pose_is_finite(robot) and any(clearance(ob, robot.x, robot.y, radius) < 0.0
+                                         for ob in obstacles)
+
+
+def valid_fraction(scan: Scan) -> float:
+    """Share of the scan's beams that are not NaN (0 for an empty scan). ``inf`` (nothing
+    within range) and ``-inf`` (closer than the sensor's minimum) are valid (ROS REP 117)."""
+    n = scan.ranges.size
+    return 0.0 if n == 0 else float(n - np.count_nonzero(np.isnan(scan.ranges))) / n
+
+
+def too_close(scan: Scan, radius: float) -> bool:
+    """A valid return (``-inf`` included) closer than ``radius`` to the sensor."""
+    r = scan.ranges
+    return bool(np.any(r[~np.isnan(r)] < radius))
+
+
+def scan_fault(scan: Scan, params: Params, reasons: list[str]) -> str:
+    """The stop reason a scan gives ("" if none); "scan_partial" goes to ``reasons``."""
+    fraction = valid_fraction(scan)
+    if fraction < params.supervisor.min_valid_returns or fraction == 0.0:
+        return "scan_invalid"
+    if fraction < 1.0:
+        reasons.append("scan_partial")
+    if too_close(scan, params.robot.radius):
+        return "obstacle_in_footprint"
+    return ""
+
+
+class Clock:
+    """The time between calls: ``tick(t)`` returns the seconds elapsed and ``"ok"``,
+    ``"clock"`` (a zero, negative or non-finite step: the data are discarded and one period
+    ``dt`` counts) or ``"clock_gap"`` (a step over ``max_step_ratio * dt``: the data are kept,
+    the filters reset). :attr:`now` always advances."""
+
+    def __init__(self, dt: float, max_step_ratio: float):
+        self.dt, self.max_step = dt, max_step_ratio * dt
+        self.reset()
+
+    def reset(self) -> None:
+        self._t_last: float | None = None
+        self.now = 0.0
+
+    def tick(self, t: float) -> tuple[float, str]:
+        if not math.isfinite(t):
+            self.now += self.dt
+            return self.dt, "clock"
+        if self._t_last is None:
+            self._t_last, self.now = t, t
+            return 0.0, "ok"
+        step = t - self._t_last
+        self._t_last = t
+        if step <= 0.0:
+            self.now += self.dt
+            return self.dt, "clock"
+        self.now += step
+        return step, "clock_gap" if step > self.max_step else "ok"

@@ -1,0 +1,270 @@
+"""Every keep-out rule: how close the robot may come to the person and to obstacles.
+
+The safety supervisor applies them to the controller's target in this order (docs/safety.md):
+
+1. **Comfort barriers** (:func:`barrier_speed`): for a clearance ``D`` to keep at ``D_min``,
+   ``dD/dt >= -barrier_rate (D - D_min)``; the approach speed shrinks to 0 at
+   ``keepout.person_clearance`` (robot centre to person) and ``keepout.obstacle_clearance``
+   (footprint to surface). 0 switches a barrier off.
+2. **Evasive check** (:func:`evasive_target`): when the robot and the person close in, the next
+   1.2 s are predicted and a command that would come within 5 cm of the protective distance
+   or of an obstacle is replaced by the closest safe one of a grid.
+3. **Braking bound** (:func:`braking_bound`): inside ``protective_distance`` the robot may only
+   turn or move away; outside it, and towards obstacles, the approach speed is what braking at
+   the rate limit can still stop in time, counting one period of delay.
+
+Every rule changes only ``v`` except the evasive check, so the robot can always turn.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Iterator, Sequence
+from typing import NamedTuple
+
+import numpy as np
+
+from companion._jit import jitable, kernel
+from companion.geometry import (
+    ObstacleArrays,
+    min_clearance,
+    obstacle_arrays,
+    segment_point,
+    unicycle_step,
+)
+from companion.params import Params
+from companion.types import Circle, Obstacle, PersonState, Pose
+
+#: Speed (m/s) up to which a person may speed up (brisk walking), in the evasive prediction.
+BRISK_WALK = 1.5
+#: Distance band (m) beyond the protective distance within which the evasive check always runs.
+EVASIVE_BAND = 0.3
+#: Candidate targets of the evasive check: fractions of v_max and omega_max.
+_V_GRID = np.linspace(-1.0, 1.0, 7)
+_W_GRID = np.linspace(-1.0, 1.0, 5)
+
+
+def speed_bound(theta: float, nx: float, ny: float, approach: float, allowed: float
+                ) -> tuple[float, float]:
+    """Interval of ``v`` with ``v e(theta).n - approach >= -allowed``: ``n`` is the unit vector
+    from the thing to the robot, ``approach`` the thing's speed towards the robot along ``n``,
+    ``allowed`` the acceptable closing speed (negative: the distance must grow)."""
+    along = math.cos(theta) * nx + math.sin(theta) * ny
+    if abs(along) < 1e-9:
+        return -math.inf, math.inf   # v cannot change the distance
+    bound = (approach - allowed) / along
+    return (bound, math.inf) if along > 0.0 else (-math.inf, bound)
+
+
+def person_normal(robot: Pose, person: PersonState) -> tuple[float, float, float, float] | None:
+    """``(nx, ny, dist, approach)``: unit vector from the person to the robot centre, their
+    distance and the person's speed towards the robot (None if they coincide)."""
+    dx, dy = robot.x - person.x, robot.y - person.y
+    dist = math.hypot(dx, dy)
+    if dist < 1e-9:
+        return None
+    nx, ny = dx / dist, dy / dist
+    return nx, ny, dist, person.v * (math.cos(person.theta) * nx + math.sin(person.theta) * ny)
+
+
+def obstacle_normals(robot: Pose, obstacles: Sequence[Obstacle], radius: float
+                     ) -> Iterator[tuple[float, float, float]]:
+    """``(nx, ny, clearance)`` per obstacle: unit vector from a circle's centre or a wall's
+    nearest point to the robot centre, and the footprint's clearance (robot centre on it:
+    skipped)."""
+    for ob in obstacles:
+        if isinstance(ob, Circle):
+            cx, cy, inner = ob.x, ob.y, ob.radius
+        else:
+            (cx, cy), inner = segment_point(robot.x, robot.y, ob.x0, ob.y0, ob.x1, ob.y1), 0.0
+        dx, dy = robot.x - cx, robot.y - cy
+        dist = math.hypot(dx, dy)
+        if dist >= 1e-9:
+            yield dx / dist, dy / dist, dist - inner - radius
+
+
+def clip_to(v: float, bounds: Iterable[tuple[float, float]], v_max: float) -> float:
+    """``v`` clipped to the intersection of ``bounds`` and ``[-v_max, v_max]``; where the
+    bounds contradict each other, the middle of the tightest pair of ends."""
+    lo, hi = -math.inf, math.inf
+    for a, b in bounds:
+        lo, hi = max(lo, a), min(hi, b)
+    v = min(max(v, lo), hi) if lo <= hi else 0.5 * (lo + hi)
+    return min(max(v, -v_max), v_max)
+
+
+def barrier_speed(v: float, robot: Pose, person: PersonState, obstacles: Sequence[Obstacle],
+                  params: Params) -> float:
+    """Rule 1: the speed closest to ``v`` that meets the comfort barriers."""
+    k = params.keepout
+    bounds = []
+    if k.person_clearance > 0.0:
+        normal = person_normal(robot, person)
+        if normal is None:
+            return 0.0  # no direction to move away along
+        nx, ny, dist, approach = normal
+        bounds.append(speed_bound(robot.theta, nx, ny, approach,
+                                  k.barrier_rate * (dist - k.person_clearance)))
+    if k.obstacle_clearance > 0.0:
+        for nx, ny, gap in obstacle_normals(robot, obstacles, params.robot.radius):
+            bounds.append(speed_bound(robot.theta, nx, ny, 0.0,
+                                      k.barrier_rate * (gap - k.obstacle_clearance)))
+    return clip_to(v, bounds, params.robot.v_max)
+
+
+def braking_speed(gap: float, decel: float, dt: float) -> float:
+    """Largest closing speed from which a robot that reacts one period ``dt`` late and then
+    decelerates at ``decel`` stops within ``gap``: the root of ``v dt + v^2 / (2 decel) = gap``
+    (0 for ``gap <= 0``)."""
+    if gap <= 0.0:
+        return 0.0
+    ad = decel * dt
+    return math.sqrt(ad * ad + 2.0 * decel * gap) - ad
+
+
+def braking_bound(v: float, robot: Pose, person: PersonState, obstacles: Sequence[Obstacle],
+                  params: Params, reasons: list[str]) -> float:
+    """Rule 3: ``v`` limited by the protective zone and the braking-distance bounds."""
+    k, s = params.keepout, params.supervisor
+    rate = min(s.accel_max, s.decel_max)
+    bounds = []
+    normal = person_normal(robot, person)
+    if normal is None:
+        reasons.append("protective_zone")
+        bounds.append((0.0, 0.0))
+    else:
+        nx, ny, dist, approach = normal
+        gap = dist - k.protective_distance
+        if gap <= 0.0:
+            reasons.append("protective_zone")
+            bounds.append(speed_bound(robot.theta, nx, ny, max(approach, 0.0), 0.0))
+        else:
+            net = max(rate - k.person_accel, 0.1 * rate)   # the person may speed up
+            bounds.append(speed_bound(robot.theta, nx, ny, max(approach, 0.0),
+                                      braking_speed(gap, net, params.dt)))
+    for nx, ny, gap in obstacle_normals(robot, obstacles, params.robot.radius):
+        bounds.append(speed_bound(robot.theta, nx, ny, 0.0,
+                                  braking_speed(gap - k.contact_margin, rate, params.dt)))
+    return clip_to(v, bounds, params.robot.v_max)
+
+
+def closing(robot: Pose, person: PersonState, v_now: float, params: Params) -> bool:
+    """True if robot and person get closer at the current velocities, or are within
+    :data:`EVASIVE_BAND` of the protective distance: then the evasive check runs."""
+    normal = person_normal(robot, person)
+    if normal is None:
+        return True
+    nx, ny, dist, approach = normal
+    if dist < params.keepout.protective_distance + EVASIVE_BAND:
+        return True
+    away = v_now * (math.cos(robot.theta) * nx + math.sin(robot.theta) * ny)
+    return approach - away > 0.0
+
+
+@jitable
+def speed_up_distance(v: float, accel: float, t: float) -> float:
+    """Extra distance (m) a person walking at ``v`` covers in ``t`` s by speeding up at
+    ``accel`` until :data:`BRISK_WALK` (none if already faster)."""
+    if accel <= 0.0 or v >= BRISK_WALK:
+        return 0.0
+    t_up = min(t, (BRISK_WALK - v) / accel)
+    return 0.5 * accel * t_up * t_up + accel * t_up * (t - t_up)
+
+
+class Rollout(NamedTuple):
+    """What :func:`rollout_margins` predicts with: the person (pose, speed, turn rate, and the
+    acceleration it may add), the protective distance, the footprint radius, the robot's rate
+    limits (m/s^2, rad/s^2) and the prediction grid (step s, number of steps)."""
+
+    px: float
+    py: float
+    ptheta: float
+    pv: float
+    pomega: float
+    person_accel: float
+    protective: float
+    radius: float
+    v_rate: float
+    w_rate: float
+    step: float
+    n_steps: int
+
+
+@jitable
+def rollout_margins(x0: float, y0: float, th0: float, v0: float, w0: float,
+                    targets: np.ndarray, spec: Rollout, obstacles: ObstacleArrays) -> np.ndarray:
+    """Predicted safety margin of each candidate ``(v, omega)`` (rows of ``targets``).
+
+    The robot's velocity ramps from ``(v0, w0)`` to the target at the rate limits; the person
+    keeps its speed and turn rate and may also gain the :func:`speed_up_distance` along its
+    heading. The margin is the smallest, over the horizon, of the distance to the person minus
+    the protective distance and the obstacle clearance (:func:`min_clearance`).
+    """
+    n = spec.n_steps
+    hx = np.empty(n)
+    hy = np.empty(n)
+    for k in range(n):
+        t = (k + 1) * spec.step
+        qx, qy, _ = unicycle_step(spec.px, spec.py, spec.ptheta, spec.pv, spec.pomega, t)
+        extra = speed_up_distance(spec.pv, spec.person_accel, t)
+        hx[k] = qx + extra * math.cos(spec.ptheta)
+        hy[k] = qy + extra * math.sin(spec.ptheta)
+    out = np.empty(targets.shape[0])
+    for i in range(targets.shape[0]):
+        x, y, th = x0, y0, th0
+        margin = math.inf
+        for k in range(n):
+            t = (k + 1) * spec.step
+            v = v0 + min(max(targets[i, 0] - v0, -spec.v_rate * t), spec.v_rate * t)
+            w = w0 + min(max(targets[i, 1] - w0, -spec.w_rate * t), spec.w_rate * t)
+            x, y, th = unicycle_step(x, y, th, v, w, spec.step)
+            margin = min(margin, math.hypot(x - hx[k], y - hy[k]) - spec.protective,
+                         min_clearance(x, y, obstacles, spec.radius))
+        out[i] = margin
+    return out
+
+
+_rollout_margins = kernel(rollout_margins)
+
+
+def evasive_target(robot: Pose, current: tuple[float, float], nominal: tuple[float, float],
+                   person: PersonState, obstacles: Sequence[Obstacle], params: Params,
+                   needed: float = 0.05, comfort: float = 0.2, horizon: float = 1.2,
+                   step: float = 0.1) -> tuple[float, float] | None:
+    """Rule 2: a replacement for the ``nominal`` target if its predicted margin is below
+    ``needed`` m, else None.
+
+    The replacement is the grid target with the best ``min(margin, comfort) - 0.02 * change``:
+    margins count up to ``comfort`` m, and among equally safe targets the one closest to the
+    nominal (``change`` in units of v_max and omega_max) wins.
+    """
+    r, s, k = params.robot, params.supervisor, params.keepout
+    grid = np.column_stack([np.repeat(_V_GRID, _W_GRID.size) * r.v_max,
+                            np.tile(_W_GRID, _V_GRID.size) * r.omega_max])
+    targets = np.vstack([np.array(nominal), grid])
+    spec = Rollout(person.x, person.y, person.theta, person.v, person.omega, k.person_accel,
+                   k.protective_distance, r.radius, min(s.accel_max, s.decel_max),
+                   s.angular_accel_max, step, int(round(horizon / step)))
+    margin = _rollout_margins(robot.x, robot.y, robot.theta, float(current[0]),
+                              float(current[1]), targets, spec, obstacle_arrays(obstacles))
+    if margin[0] >= needed:
+        return None
+    change = np.hypot((targets[:, 0] - nominal[0]) / r.v_max,
+                      (targets[:, 1] - nominal[1]) / r.omega_max)
+    best = int(np.argmax(np.minimum(margin, comfort) - 0.02 * change))
+    return float(targets[best, 0]), float(targets[best, 1])
+
+
+def keep_out(target: tuple[float, float, float], robot: Pose, person: PersonState,
+             obstacles: Sequence[Obstacle], v_now: tuple[float, float], params: Params,
+             reasons: list[str]) -> tuple[float, float, float]:
+    """The target ``(v, omega, u_ob)`` after rules 1-3 (module docstring); ``v_now`` is the
+    command in force. Appends "evasive" or "protective_zone" to ``reasons`` when they act."""
+    v, w, u_ob = target
+    v = barrier_speed(v, robot, person, obstacles, params)
+    if closing(robot, person, v_now[0], params):
+        evade = evasive_target(robot, v_now, (v, w), person, obstacles, params)
+        if evade is not None:
+            (v, w), u_ob = evade, 0.0
+            reasons.append("evasive")
+    return braking_bound(v, robot, person, obstacles, params, reasons), w, u_ob

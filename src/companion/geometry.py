@@ -1,0 +1,151 @@
+"""Plane geometry: angles, the unicycle (paper Eq. 1-3) and obstacle clearance.
+
+One angle convention: wrapped angles are in (-pi, pi] (:func:`wrap_pi`), bearings from the
+person in [0, 2*pi) (:func:`wrap_2pi`). One clearance rule: the distance from a point to an
+obstacle's surface (a circle's rim, a wall's centre-line), minus the footprint radius
+(:func:`clearance`). The scalar functions are :func:`~companion._jit.jitable`, so compiled
+kernels use these very functions.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import numpy as np
+
+from companion._jit import jitable, kernel
+from companion.types import Circle, Obstacle
+
+TWO_PI = 2.0 * math.pi
+
+
+@jitable
+def wrap_pi(angle: float) -> float:
+    """Wrap an angle to (-pi, pi]."""
+    a = (angle + math.pi) % TWO_PI   # [0, 2*pi]: Python's modulo, also in compiled code
+    if a == 0.0:
+        a = TWO_PI
+    return a - math.pi
+
+
+def wrap_pi_array(angle: np.ndarray) -> np.ndarray:
+    """:func:`wrap_pi` elementwise, for arrays (the same operations)."""
+    a = (np.asarray(angle, dtype=float) + math.pi) % TWO_PI
+    return np.where(a == 0.0, TWO_PI, a) - math.pi
+
+
+@jitable
+def wrap_2pi(angle: float) -> float:
+    """Wrap an angle to [0, 2*pi)."""
+    a = angle % TWO_PI
+    # the modulo of a tiny negative number can round to exactly 2*pi
+    return 0.0 if a >= TWO_PI else a
+
+
+@jitable
+def unicycle_step(x: float, y: float, theta: float, v: float, omega: float, dt: float
+                  ) -> tuple[float, float, float]:
+    """Pose after ``dt`` s at constant ``v`` and ``omega``: the exact circular arc (a straight
+    segment when ``omega`` is 0), smooth as ``omega -> 0``. Theta is not wrapped."""
+    half = 0.5 * omega * dt
+    if abs(half) < 1e-6:
+        sinc = 1.0 - half * half / 6.0   # sin(h)/h to fourth order: exact in doubles here
+    else:
+        sinc = math.sin(half) / half
+    dist = v * dt * sinc
+    mid = theta + half
+    return x + dist * math.cos(mid), y + dist * math.sin(mid), theta + omega * dt
+
+
+@jitable
+def offset_point(x: float, y: float, theta: float, d: float) -> tuple[float, float]:
+    """Reference point R at distance ``d`` ahead of the wheel-axle centre (Eq. 2)."""
+    return x + d * math.cos(theta), y + d * math.sin(theta)
+
+
+@jitable
+def segment_point(px: float, py: float, x0: float, y0: float, x1: float, y1: float
+                  ) -> tuple[float, float]:
+    """Point of the segment (x0, y0)-(x1, y1) nearest to (px, py)."""
+    ex, ey = x1 - x0, y1 - y0
+    length2 = ex * ex + ey * ey
+    s = 0.0
+    if length2 > 0.0:
+        s = min(max(((px - x0) * ex + (py - y0) * ey) / length2, 0.0), 1.0)
+    return x0 + s * ex, y0 + s * ey
+
+
+def nearest_point(obstacle: Obstacle, px: float, py: float) -> tuple[float, float]:
+    """Point of the obstacle's surface nearest to (px, py) (a wall: its centre-line)."""
+    if isinstance(obstacle, Circle):
+        dx, dy = px - obstacle.x, py - obstacle.y
+        dist = math.hypot(dx, dy)
+        if dist < 1e-12:
+            return obstacle.x + obstacle.radius, obstacle.y
+        return obstacle.x + obstacle.radius * dx / dist, obstacle.y + obstacle.radius * dy / dist
+    return segment_point(px, py, obstacle.x0, obstacle.y0, obstacle.x1, obstacle.y1)
+
+
+@jitable
+def circle_clearance(px: float, py: float, cx: float, cy: float, r: float) -> float:
+    """Distance from (px, py) to the rim of the circle (cx, cy, r) (negative: inside)."""
+    return math.hypot(px - cx, py - cy) - r
+
+
+@jitable
+def wall_clearance(px: float, py: float, x0: float, y0: float, x1: float, y1: float) -> float:
+    """Distance from (px, py) to the segment (x0, y0)-(x1, y1)."""
+    qx, qy = segment_point(px, py, x0, y0, x1, y1)
+    return math.hypot(px - qx, py - qy)
+
+
+def clearance(obstacle: Obstacle, px: float, py: float, footprint: float = 0.0) -> float:
+    """Distance from a footprint circle of radius ``footprint`` at (px, py) to the obstacle's
+    surface (negative: overlap)."""
+    if isinstance(obstacle, Circle):
+        return circle_clearance(px, py, obstacle.x, obstacle.y, obstacle.radius) - footprint
+    o = obstacle
+    return wall_clearance(px, py, o.x0, o.y0, o.x1, o.y1) - footprint
+
+
+class ObstacleArrays(NamedTuple):
+    """Obstacles as arrays for compiled kernels: circles as rows (x, y, r), walls as rows
+    (x0, y0, x1, y1)."""
+
+    circles: np.ndarray
+    walls: np.ndarray
+
+
+def obstacle_arrays(obstacles: Sequence[Obstacle]) -> ObstacleArrays:
+    """The obstacles as :class:`ObstacleArrays`."""
+    circles = [(o.x, o.y, o.radius) for o in obstacles if isinstance(o, Circle)]
+    walls = [(o.x0, o.y0, o.x1, o.y1) for o in obstacles if not isinstance(o, Circle)]
+    return ObstacleArrays(np.array(circles, dtype=float).reshape(-1, 3),
+                          np.array(walls, dtype=float).reshape(-1, 4))
+
+
+@jitable
+def min_clearance(px: float, py: float, obstacles: ObstacleArrays, footprint: float) -> float:
+    """Smallest :func:`clearance` from a footprint at (px, py) to the obstacles (inf if none)."""
+    out = math.inf
+    c, w = obstacles.circles, obstacles.walls
+    for i in range(c.shape[0]):
+        out = min(out, circle_clearance(px, py, c[i, 0], c[i, 1], c[i, 2]))
+    for j in range(w.shape[0]):
+        out = min(out, wall_clearance(px, py, w[j, 0], w[j, 1], w[j, 2], w[j, 3]))
+    return out - footprint
+
+
+@jitable
+def _path_clearance(xs: np.ndarray, ys: np.ndarray, obstacles: ObstacleArrays,
+                    footprint: float) -> float:
+    out = math.inf
+    for i in range(xs.shape[0]):
+        out = min(out, min_clearance(xs[i], ys[i], obstacles, footprint))
+    return out
+
+
+#: Smallest :func:`min_clearance` along the points ``(xs[i], ys[i])`` (compiled).
+path_clearance = kernel(_path_clearance)

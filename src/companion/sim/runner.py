@@ -1,0 +1,122 @@
+"""One runner for many episodes of the full stack: safety supervisor, avoidance layer,
+controller and sensing, in parallel worker processes.
+
+An :class:`EpisodeSpec` says everything one episode needs; :func:`run_one` simulates it in this
+process and :func:`run_many` many of them in worker processes, returning the same logs (or
+what ``summarize`` makes of each log, in the worker) in the order of the specs. Each episode
+draws its noise from its own seed, so the results do not depend on the number of workers.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from functools import partial
+from typing import Any
+
+from companion.control import make_controller
+from companion.control.keepout import evasive_target
+from companion.errors import ConfigError
+from companion.params import Params
+from companion.sim.episode import SensorNoise, run_episode
+from companion.sim.faults import Fault
+from companion.sim.person import PersonMotion
+from companion.sim.sensing import make_perception
+from companion.types import Log, Obstacle, PersonState, Pose
+
+
+@dataclass(frozen=True)
+class EpisodeSpec:
+    """One episode (see :func:`companion.sim.episode.run_episode` for the fields)."""
+
+    controller: str
+    person: PersonMotion
+    params: Params
+    duration: float
+    start: Pose | None = None
+    seed: int = 0
+    obstacles: tuple[Obstacle, ...] = field(default_factory=tuple)
+    obstacle_source: str = "truth"
+    """"truth": the controller knows the obstacles exactly; "lidar": it sees what the
+    simulated LiDAR detects."""
+    faults: tuple[Fault, ...] = field(default_factory=tuple)
+    noise: SensorNoise = SensorNoise()
+    start_velocity: tuple[float, float] | None = None
+
+
+def run_one(spec: EpisodeSpec) -> Log:
+    """Simulate one episode of the standard stack of ``spec.controller``."""
+    return run_episode(make_controller(spec.controller, spec.params), spec.person, spec.params,
+                       spec.duration, start=spec.start, seed=spec.seed, noise=spec.noise,
+                       obstacles=spec.obstacles,
+                       perception=make_perception(spec.obstacle_source, spec.params),
+                       faults=spec.faults, start_velocity=spec.start_velocity)
+
+
+def default_workers() -> int:
+    """One worker per CPU this process may use."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+def warm_up() -> None:
+    """Load (or compile) the compiled kernels of the stack in this process, so that worker
+    processes forked from it inherit them instead of each loading them."""
+    params = Params()
+    make_controller("lqr", params)
+    evasive_target(Pose(0.0, 0.0, 0.0), (0.0, 0.0), (0.0, 0.0),
+                   PersonState(0.6, 0.0, 0.0, 0.0, 0.0), (), params)
+
+
+def _run(spec: EpisodeSpec, summarize: Callable[[Log], Any] | None) -> Any:
+    log = run_one(spec)
+    return log if summarize is None else summarize(log)
+
+
+def run_many(specs: Sequence[EpisodeSpec], workers: int | None = None,
+             summarize: Callable[[Log], Any] | None = None,
+             progress: Callable[[int], None] | None = None) -> list:
+    """The log of every episode of ``specs`` (or ``summarize(log)``), in order.
+
+    Parameters
+    ----------
+    specs : sequence of EpisodeSpec
+    workers : int, optional
+        Worker processes (default: one per CPU); 1 runs everything in this process.
+    summarize : callable, optional
+        A module-level function applied to each log in the worker (keeps only what is needed,
+        e.g. :func:`companion.metrics.compute`).
+    progress : callable, optional
+        Called with the number of episodes finished so far.
+
+    Raises
+    ------
+    ConfigError
+        If ``workers`` is not a positive integer.
+    """
+    workers = default_workers() if workers is None else workers
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ConfigError(f"workers: expected a positive integer, got {workers!r}")
+    job = partial(_run, summarize=summarize)
+    results: list = []
+    if workers == 1 or len(specs) <= 1:
+        for spec in specs:
+            results.append(job(spec))
+            if progress:
+                progress(len(results))
+        return results
+    warm_up()
+    # Several chunks per worker keep every worker busy to the end.
+    chunk = max(1, math.ceil(len(specs) / (4 * workers)))
+    context = multiprocessing.get_context("fork") if os.name == "posix" else None
+    with ProcessPoolExecutor(max_workers=min(workers, len(specs)), mp_context=context) as pool:
+        for result in pool.map(job, specs, chunksize=chunk):
+            results.append(result)
+            if progress:
+                progress(len(results))
+    return results

@@ -1,0 +1,122 @@
+"""The keep-out rules of the safety supervisor, each alone (companion.control.keepout)."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from companion.control.keepout import (
+    Rollout,
+    _rollout_margins,
+    barrier_speed,
+    braking_bound,
+    braking_speed,
+    evasive_target,
+    rollout_margins,
+)
+from companion.geometry import obstacle_arrays, unicycle_step
+from companion.params import Params
+from companion.types import Circle, PersonState, Pose, Wall
+
+P = Params()
+
+
+@pytest.mark.parametrize("obstacle", [Circle(3.0, 0.0, 0.3), Wall(3.0, -2.0, 3.0, 2.0)])
+def test_barrier_stops_head_on_approach(obstacle):
+    """Driving straight at an obstacle, the barrier alone keeps the clearance."""
+    pose = Pose(0.0, 0.0, 0.0)
+    person = PersonState(0.0, 5.0, 0.0, 0.0, 0.0)
+    for _ in range(400):
+        v = barrier_speed(1.5, pose, person, [obstacle], P)
+        pose = Pose(*unicycle_step(pose.x, pose.y, pose.theta, v, 0.0, P.dt))
+    if isinstance(obstacle, Circle):
+        clearance = math.hypot(pose.x - obstacle.x, pose.y - obstacle.y) - obstacle.radius
+    else:
+        clearance = obstacle.x0 - pose.x
+    clearance -= P.robot.radius
+    assert clearance == pytest.approx(P.keepout.obstacle_clearance, abs=0.01)
+
+
+def test_barrier_keeps_person_clearance_and_backs_off():
+    person = PersonState(2.0, 0.0, math.pi, 0.5, 0.0)   # walks towards the robot
+    pose = Pose(0.0, 0.0, 0.0)
+    closest = math.inf
+    for _ in range(200):
+        v = barrier_speed(1.0, pose, person, [], P)
+        pose = Pose(*unicycle_step(pose.x, pose.y, pose.theta, v, 0.0, P.dt))
+        person = PersonState(person.x - 0.5 * P.dt, 0.0, math.pi, 0.5, 0.0)
+        closest = min(closest, math.hypot(pose.x - person.x, pose.y - person.y))
+    assert closest >= P.keepout.person_clearance - 0.02
+
+
+def test_barriers_off():
+    k = dataclasses.replace(P.keepout, person_clearance=0.0, obstacle_clearance=0.0)
+    p = dataclasses.replace(P, keepout=k)
+    assert barrier_speed(1.2, Pose(0, 0, 0), PersonState(0.3, 0, 0, 0, 0), [Circle(0.5, 0, 0.2)],
+                      p) == 1.2
+
+
+@pytest.mark.parametrize("gap", [0.01, 0.3, 1.0, 5.0])
+def test_braking_speed_stops_exactly_within_the_gap(gap):
+    a, dt = 2.5, 0.05
+    v = braking_speed(gap, a, dt)
+    assert v * dt + v * v / (2 * a) == pytest.approx(gap)
+    assert braking_speed(0.0, a, dt) == 0.0 and braking_speed(-1.0, a, dt) == 0.0
+
+
+def test_braking_bound_stops_at_the_protective_distance_and_lets_the_robot_leave():
+    person = PersonState(0.0, 0.0, 0.0, 0.0, 0.0)
+    pose, reasons = Pose(-3.0, 0.0, 0.0), []
+    for _ in range(200):                     # drive at the person, braking as allowed
+        v = braking_bound(1.5, pose, person, (), P, reasons)
+        pose = Pose(*unicycle_step(pose.x, pose.y, pose.theta, v, 0.0, P.dt))
+    assert -pose.x >= P.keepout.protective_distance - 1e-9
+    assert -pose.x == pytest.approx(P.keepout.protective_distance, abs=0.02)
+    inside = Pose(-0.3, 0.0, 0.0)
+    assert braking_bound(1.0, inside, person, (), P, reasons) <= 0.0   # no closer
+    assert braking_bound(-1.0, inside, person, (), P, reasons) == -1.0  # away is fine
+    assert "protective_zone" in reasons
+
+
+def _spec(person, p=P, horizon=1.2, step=0.1):
+    s, k = p.supervisor, p.keepout
+    return Rollout(person.x, person.y, person.theta, person.v, person.omega, k.person_accel,
+                   k.protective_distance, p.robot.radius, min(s.accel_max, s.decel_max),
+                   s.angular_accel_max, step, int(round(horizon / step)))
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.tuples(*[st.floats(-3, 3)] * 3), st.tuples(st.floats(-1.5, 1.5), st.floats(-1, 1)),
+       st.tuples(*[st.floats(-3, 3)] * 3, st.floats(-0.5, 2.0), st.floats(-2, 2)),
+       st.lists(st.tuples(st.floats(-3, 3), st.floats(-3, 3), st.floats(0, 1)), max_size=3),
+       st.lists(st.tuples(*[st.floats(-3, 3)] * 4), max_size=2))
+def test_compiled_rollout_equals_its_python_source(pose, current, person, circles, walls):
+    obstacles = obstacle_arrays([Circle(*c) for c in circles] + [Wall(*w) for w in walls])
+    targets = np.random.default_rng(0).uniform(-1.5, 1.5, (36, 2))
+    spec = _spec(PersonState(*person))
+    np.testing.assert_allclose(_rollout_margins(*pose, *current, targets, spec, obstacles),
+                               rollout_margins(*pose, *current, targets, spec, obstacles),
+                               rtol=1e-12, atol=1e-12)
+
+
+def test_rollout_margin_of_standing_still_is_the_gap_to_a_standing_person_and_a_wall():
+    person = PersonState(2.0, 0.0, 0.0, 0.0, 0.0)
+    wall = obstacle_arrays([Wall(-1.0, -1.0, 1.0, -1.0)])
+    margin = _rollout_margins(0.0, 0.0, 0.0, 0.0, 0.0, np.zeros((1, 2)), _spec(person), wall)
+    assert margin[0] == pytest.approx(min(2.0 - P.keepout.protective_distance,
+                                          1.0 - P.robot.radius))
+    # driving at the person at full speed closes the gap by more than the ramp allows to stop
+    ahead = _rollout_margins(0.0, 0.0, 0.0, 0.0, 0.0, np.array([[1.5, 0.0]]), _spec(person),
+                             obstacle_arrays([]))
+    assert ahead[0] < 2.0 - P.keepout.protective_distance - 0.5
+
+
+def test_evasive_target_replaces_a_command_into_the_person_only():
+    person = PersonState(1.2, 0.0, math.pi, 1.0, 0.0)      # walks at the robot
+    evade = evasive_target(Pose(0.0, 0.0, 0.0), (0.0, 0.0), (1.0, 0.0), person, (), P)
+    assert evade is not None and evade[0] < 1.0
+    far = PersonState(10.0, 5.0, 0.0, 1.0, 0.0)
+    assert evasive_target(Pose(0.0, 0.0, 0.0), (0.0, 0.0), (1.0, 0.0), far, (), P) is None
