@@ -221,3 +221,18 @@ def test_bench_json_has_the_documented_keys(tmp_path, capsys):
 def test_bench_bad_usage(argv, message, capsys):
     code, _, err = run(argv, capsys)
     assert code == 2 and message in err and err.count("\n") == 1
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly_with_every_file_written(tmp_path):
+    """``companion run ... | true``: no BrokenPipeError traceback, exit 0, outputs complete."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "run"
+    cmd = (f"{sys.executable} -m companion.apps.cli run line --duration 1 --plot "
+           f"--out {out} | true")
+    done = subprocess.run(["bash", "-c", f"set -o pipefail; {cmd}"], capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0 and done.stderr == ""
+    assert sorted(p.name for p in out.iterdir()) == ["errors.png", "inputs.png", "log.csv",
+                                                      "metrics.json", "trajectory.png"]

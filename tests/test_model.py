@@ -1,4 +1,4 @@
-"""Property tests of the companion model (paper Sec. 2, Eq. 4-8; NOTES.md points 1-3, 6).
+"""Property tests of the companion model (paper Sec. 2, Eq. 4-8; docs/model.md R1-R3, R6).
 
 Checks derivatives against finite differences, geometric identities under rigid motions of
 the whole scene, the model against the kinematics it is derived from, the slot reference as
@@ -100,7 +100,7 @@ def _place_reference_point(px, py, pth, local_x, local_y, robot_theta, d):
 @pytest.mark.parametrize("local, expected", [((0.0, 1.0), LEFT), ((0.0, -1.0), RIGHT),
                                              ((-1.0, 0.0), BEHIND), ((1.0, 0.0), FRONT)])
 def test_bearing_sides_at_origin(local, expected):
-    """Person at the origin heading +x (NOTES.md point 1)."""
+    """Person at the origin heading +x (docs/model.md R1)."""
     for theta_r in (0.0, 0.7, -2.0, math.pi):
         pose = _place_reference_point(0.0, 0.0, 0.0, *local, theta_r, D)
         rho, alpha, beta = relative_state(*pose, 0.0, 0.0, 0.0, D)
@@ -213,7 +213,7 @@ def test_dynamics_integrates_to_kinematics(rho, alpha, beta, v, om, vh, omh, d):
 
 
 def test_faster_robot_on_left_moves_ahead():
-    """NOTES.md point 3: on the left, a robot faster than the person makes alpha decrease."""
+    """docs/model.md R3: on the left, a robot faster than the person makes alpha decrease."""
     chi = np.array([1.0, LEFT, 0.0])
     f = dynamics(chi, np.array([1.2, 0.0]), np.array([1.0, 0.0]), D)
     assert f[1] < 0.0
@@ -285,7 +285,7 @@ def test_slot_reference_infeasible_turn_is_signalled():
 @given(st.floats(0.3, 3.0), bearings, headings_diff, person_v, person_omega, offsets)
 def test_discretized_jacobian_matches_corrected_paper_form(rho_d, alpha_d, beta_d, v_h, omega_h,
                                                            d):
-    """Eq. 8 entries with the NOTES.md point 3 corrections, at u = u_d = u_h (K_f = 1)."""
+    """Eq. 8 entries with the corrections of docs/model.md R3, at u = u_d = u_h (K_f = 1)."""
     chi = np.array([rho_d, alpha_d, beta_d])
     u = w = np.array([v_h, omega_h])
     a, b = discretize(*jacobians(chi, u, w, d), T, "euler")

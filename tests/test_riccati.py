@@ -95,7 +95,7 @@ def reference_model(op):
 
 
 def reference_gain(a_bar, b_bar, q, r):
-    """scipy's ``(K, P)`` via :func:`companion.lqr.dlqr`, or None where it finds no
+    """scipy's ``(K, P)`` via :func:`companion.riccati.dlqr`, or None where it finds no
     stabilising solution (LqrController.step treats both exceptions alike)."""
     try:
         return dlqr(a_bar, b_bar, np.diag(q), np.diag(r), check=False)

@@ -3,7 +3,7 @@
 * RMSE (Eq. 21) of rho, alpha and beta against the nominal desired state (rho_d, alpha_d, 0),
   angle errors wrapped to (-pi, pi];
 * RMSV (Eq. 22) of v and omega against the person's (v_h, omega_h). In a turn the robot must
-  move at a different speed than the person (docs/model.md, reading notes), so RMSV > 0
+  move at a different speed than the person (docs/model.md R7), so RMSV > 0
   there is geometry;
 * minimum distance from the robot centre (wheel axle) to the person;
 * settling time: the first time after which |rho_e| < tol_rho, |alpha_e| < tol_alpha and

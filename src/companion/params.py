@@ -194,8 +194,8 @@ class AvoidanceParams(Validated):
     c2: float = param(0.9, "1/m", "decay of the acceleration with rho_ob (Table 1)",
                       non_negative)
     k_ob: float = param(0.375, "-", "K_ob = r_o / rho_o, obstacle radius over influence range; "
-                        "Table 1 prints 0.6 but both experiments imply 0.375 (docs/model.md, "
-                        "reading notes)", positive)
+                        "Table 1 prints 0.6 but both experiments imply 0.375 (docs/model.md "
+                        "R9)", positive)
     wall_influence: float = param(0.5, "m", "influence range rho_o of wall segments", positive)
     decay_time: float = param(0.5, "s", "time constant with which u_ob leaks back to 0 "
                               "(ours; the paper integrates without leak)", positive)

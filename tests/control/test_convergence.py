@@ -33,7 +33,7 @@ def test_settles_and_keeps_distance(case, results):
 
 
 def test_paper_literal_design_does_not_converge_from_behind():
-    """docs/model.md, reading notes: linearising only at the desired state fails from
+    """docs/model.md R5: linearising only at the desired state fails from
     behind starts."""
     case = convergence.Case(1.0, Pose(0.0, 3.0, 0.0), "left")
     m = metrics.compute(run_one(convergence.episode(case, "lqr-paper", Params(), 30.0)))

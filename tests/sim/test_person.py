@@ -69,7 +69,7 @@ def test_figure8_matches_eq23_and_notes():
     states = [f.state(t) for t in ts]
     peak_v = max(s.v for s in states)
     peak_w = max(abs(s.omega) for s in states)
-    assert peak_v == pytest.approx(1.05, abs=0.01)   # NOTES.md point 10
+    assert peak_v == pytest.approx(1.05, abs=0.01)   # docs/model.md R10
     assert peak_w == pytest.approx(0.34, abs=0.01)
     # speed and turn rate agree with finite differences of the position and heading
     xy = np.array([(s.x, s.y) for s in states])

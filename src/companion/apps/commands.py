@@ -170,10 +170,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = output_dir(Path(args.out or Path("out") / sc.name), RUN_OUTPUTS)
     write_log(out / "log.csv", log)
     write_json(out / "metrics.json", m)
-    print(f"{sc.name}: {sc.description}")
-    print(f"controller {sc.controller}, {sc.duration:g} s, side bearing "
-          f"{sc.params.formation.bearing:.4f} rad, distance {sc.params.formation.distance:g} m")
-    print("\n".join(summary_lines(m)))
     written = ["log.csv", "metrics.json"]
     if args.plot:
         title = f"{sc.name} / {sc.controller}"
@@ -190,6 +186,12 @@ def cmd_run(args: argparse.Namespace) -> int:
             save_figure(fig, out / name)
             plots.close(fig)
             written.append(name)
+    # Everything is written before anything is printed: a reader that goes away early
+    # (| head) cannot cut the outputs short.
+    print(f"{sc.name}: {sc.description}")
+    print(f"controller {sc.controller}, {sc.duration:g} s, side bearing "
+          f"{sc.params.formation.bearing:.4f} rad, distance {sc.params.formation.distance:g} m")
+    print("\n".join(summary_lines(m)))
     print(f"wrote {', '.join(written)} in {out}")
     return 0
 
@@ -207,12 +209,11 @@ def cmd_convergence(args: argparse.Namespace) -> int:
     if any(v < 0 for v in speeds):
         raise UsageError(f"--speeds: expected speeds >= 0 m/s, got {args.speeds!r}")
     duration = _positive(args.duration, "--duration")
+    out = output_dir(Path(args.out or Path("out") / "convergence"))
     cases = list(convergence.cases(speeds))
     logs = run_many([convergence.episode(c, args.controller, params, duration) for c in cases],
                     workers_arg(args))
-    rows, runs, failures = [], {}, 0
-    print(f"{'speed':>5} {'start':>10} {'heading':>8} {'side':>5} {'settle_s':>9} "
-          f"{'min_dist_m':>10}")
+    rows, runs, lines, failures = [], {}, [], 0
     for case, log in zip(cases, logs):
         m = metrics.compute(log)
         settle = m["settling_time_s"]
@@ -221,10 +222,9 @@ def cmd_convergence(args: argparse.Namespace) -> int:
         failures += not ok
         rows.append((*convergence.csv_row(case, m), int(ok)))
         runs.setdefault(case.speed, []).append((case.label, case.side, log))
-        print(f"{case.speed:5.2f} {case.label:>10} {case.start.theta:8.3f} {case.side:>5} "
-              f"{'never' if settle is None else f'{settle:.2f}':>9} "
-              f"{m['min_person_distance_m']:10.3f}{'' if ok else '  FAIL'}")
-    out = output_dir(Path(args.out or Path("out") / "convergence"))
+        lines.append(f"{case.speed:5.2f} {case.label:>10} {case.start.theta:8.3f} "
+                     f"{case.side:>5} {'never' if settle is None else f'{settle:.2f}':>9} "
+                     f"{m['min_person_distance_m']:10.3f}{'' if ok else '  FAIL'}")
     write_csv(out / "convergence.csv", (*convergence.CSV_COLUMNS, "ok"), rows)
     written = ["convergence.csv"]
     if args.plot:
@@ -235,6 +235,9 @@ def cmd_convergence(args: argparse.Namespace) -> int:
             save_figure(fig, out / name)
             plots.close(fig)
             written.append(name)
+    print(f"{'speed':>5} {'start':>10} {'heading':>8} {'side':>5} {'settle_s':>9} "
+          f"{'min_dist_m':>10}")
+    print("\n".join(lines))
     print(f"{len(rows) - failures}/{len(rows)} runs settled within {args.settle_limit:g} s "
           f"and kept >= 0.5 m from the person")
     print(f"wrote {', '.join(written)} in {out}")
@@ -251,12 +254,12 @@ def cmd_pedestrians(args: argparse.Namespace) -> int:
                                        min_duration=args.min_duration)
     if not tracks:
         raise UsageError("no track is fast and long enough; lower --min-speed or --min-duration")
+    out = output_dir(Path(args.out or Path("out") / "pedestrians"))
     print(f"{len(tracks)} tracks (mean speed > {args.min_speed:g} m/s, >= "
           f"{args.min_duration:g} s), controller {args.controller}")
     rows = evaluate_tracks(tracks, params, args.controller, workers=workers_arg(args))
     keys = ("scene", "ped_id", "duration_s", "mean_speed_mps", "rmse_rho_m", "rmse_alpha_rad",
             "min_person_distance_m", "finite")
-    out = output_dir(Path(args.out or Path("out") / "pedestrians"))
     write_csv(out / "pedestrians.csv", keys, ([r[k] for k in keys] for r in rows))
     rho = np.median([r["rmse_rho_m"] for r in rows])
     alpha = np.median([r["rmse_alpha_rad"] for r in rows])
@@ -273,10 +276,10 @@ def cmd_pedestrians(args: argparse.Namespace) -> int:
 def cmd_soak(args: argparse.Namespace) -> int:
     params = params_arg(args)
     duration = _positive(args.duration, "--duration")
+    out = output_dir(Path(args.out or Path("out") / "soak"))
     print(f"soak: {duration:g} s of a random walker among pillars (seed {args.seed}), "
           f"controller {args.controller}; about {duration / 25:.0f} s")
     summary, log = soak.run_soak(duration, args.seed, args.controller, params)
-    out = output_dir(Path(args.out or Path("out") / "soak"))
     write_json(out / "soak.json", summary)
     written = ["soak.json"]
     if args.log:
@@ -329,12 +332,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
     duration = _positive(args.duration, "--duration")
     result = benchmark.run(args.episodes, duration, workers_arg(args), not args.no_first_step,
                            progress=lambda msg: print(f"bench: {msg}", file=sys.stderr))
-    if args.json:
-        print(json.dumps(result, indent=2, allow_nan=False))
-    else:
-        print(benchmark.text(result))
     if args.out:
         write_json(args.out, result)
+    print(json.dumps(result, indent=2, allow_nan=False) if args.json else benchmark.text(result))
     return 0
 
 

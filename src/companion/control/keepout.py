@@ -39,9 +39,8 @@ from companion.types import Circle, Obstacle, PersonState, Pose
 BRISK_WALK = 1.5
 #: Distance band (m) beyond the protective distance within which the evasive check always runs.
 EVASIVE_BAND = 0.3
-#: Candidate targets of the evasive check: fractions of v_max and omega_max.
-_V_GRID = np.linspace(-1.0, 1.0, 7)
-_W_GRID = np.linspace(-1.0, 1.0, 5)
+#: Candidate targets of the evasive check: 7 x 5 fractions of (v_max, omega_max).
+_GRID = np.array([(v, w) for v in np.linspace(-1.0, 1.0, 7) for w in np.linspace(-1.0, 1.0, 5)])
 
 
 def speed_bound(theta: float, nx: float, ny: float, approach: float, allowed: float
@@ -239,9 +238,7 @@ def evasive_target(robot: Pose, current: tuple[float, float], nominal: tuple[flo
     nominal (``change`` in units of v_max and omega_max) wins.
     """
     r, s, k = params.robot, params.supervisor, params.keepout
-    grid = np.column_stack([np.repeat(_V_GRID, _W_GRID.size) * r.v_max,
-                            np.tile(_W_GRID, _V_GRID.size) * r.omega_max])
-    targets = np.vstack([np.array(nominal), grid])
+    targets = np.vstack([nominal, _GRID * (r.v_max, r.omega_max)])
     spec = Rollout(person.x, person.y, person.theta, person.v, person.omega, k.person_accel,
                    k.protective_distance, r.radius, min(s.accel_max, s.decel_max),
                    s.angular_accel_max, step, int(round(horizon / step)))

@@ -3,7 +3,7 @@
 At each sample ``k`` (time ``t_k = k * dt``) the runner reads the person's true state, the
 controller observes it (optionally with Gaussian sensor noise) together with the robot pose,
 and the command is held for one period while the unicycle is integrated exactly
-(:func:`companion.kinematics.unicycle_step`). Row ``k`` of the log holds the state at ``t_k``
+(:func:`companion.geometry.unicycle_step`). Row ``k`` of the log holds the state at ``t_k``
 and the command applied from ``t_k`` on. The run is deterministic for a given seed.
 """
 

@@ -2,8 +2,8 @@
 
 * :class:`SegmentPath`: pieces of constant curvature with linearly ramped speed, integrated in
   closed form; :func:`line`, :func:`circle` and :func:`u_shape` are built from it.
-* :class:`Figure8`: the lemniscate of Eq. (23), traversed once per ``lap_time`` (NOTES.md
-  point 10: the printed ``t`` is a phase, not seconds).
+* :class:`Figure8`: the lemniscate of Eq. (23), traversed once per ``lap_time`` (the printed
+  ``t`` is a phase, not seconds: docs/model.md R10).
 * :class:`companion.sim.recorded.RecordedPerson`: samples from a CSV file.
 """
 
