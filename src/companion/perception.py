@@ -1,46 +1,11 @@
 """Obstacle extraction from a 2D LiDAR scan: clusters of returns -> covering circles.
 
-Pipeline (:func:`extract_obstacles`)
-
-1. **Clustering.** Returns are taken in beam order; a new cluster starts where a beam has no
-   return (``inf`` or NaN) or where consecutive returns are farther apart than
-   ``max(cluster_gap, r * sin(dphi) / sin(breakpoint_angle - dphi))``, ``r`` the larger of
-   their ranges and ``dphi`` their angular step. The second term is the adaptive breakpoint
-   of Borges & Aldon (2004): the spacing of returns on a surface seen ``breakpoint_angle``
-   from grazing, so that a far or slanted wall does not fall apart into single returns. In a
-   full-circle scan the cluster crossing the +-pi seam is joined up. Clusters with fewer than
-   ``min_points`` returns are dropped as noise.
-2. **One circle per cluster if it is one.** An algebraic (Kasa) least-squares circle is fitted
-   to the cluster. It is accepted if its centre lies on the far side of the points from the
-   sensor, the sensor is outside it, its radius is at most ``max_radius``, the RMS radial
-   residual is at most ``fit_tolerance`` and the returns bulge towards the sensor by at least
-   ``2 * fit_tolerance`` from their chord (a convex arc; through a nearly straight, noisy
-   piece the fitted circle would be arbitrary).
-3. **Otherwise split.** A cluster that is no such circle (a wall, a corner, a pillar larger
-   than ``max_radius``, objects merged into one cluster) is cut into consecutive pieces of
-   path length at most ``max_segment`` (measured along the returns smoothed by a 5-point
-   moving average, so that noise does not inflate it); neighbouring pieces share their
-   boundary return. Each piece gets the Kasa circle if acceptable (same test), else the
-   fallback: radius half the piece's chord, centre the piece's mean pushed away from the
-   sensor by that radius along the chord's normal.
-4. **Clamp and cover.** The radius is clamped to ``[min_radius, max_radius]`` and then
-   enlarged to the farthest return of the cluster or piece. Every reported circle therefore
-   contains all its returns; as a disc is convex and neighbouring pieces share a return, the
-   union of the circles of a cluster contains the whole polyline through its returns, which
-   is the seen surface up to the beam spacing. Covering has priority over ``max_radius``.
-5. **The person.** Circles whose centre lies within ``person_radius + person_exclusion`` of
-   the tracked person's position are the person's body and are not reported.
-
-The sensor's only view of an object is its near side, which is why fits are checked for the
-centre's side and a fallback exists; the covering step makes the result safe to avoid
-however good the fit was.
-
-Limitations: returns in clusters below ``min_points`` (a thin pole far away, the grazing end
-of a wall beyond ``breakpoint_angle``) are not reported at all. A straight wall piece is
-represented by a circle that bulges up to about 0.2 x ``max_segment`` (0.12 m) in front of
-the wall. When the person stands within ``cluster_gap`` of a wall or an object their
-returns merge; the pieces of that cluster centred near the person are dropped with the
-person's, so a short stretch of the object next to the person can be missing.
+:func:`extract_obstacles` clusters the returns (fixed gap or the adaptive Borges-Aldon
+breakpoint; the full-circle seam joined), fits one algebraic (Kasa) circle per cluster when it
+is a convex arc, splits other clusters (walls, corners, merged objects) into pieces of at most
+``max_segment``, enlarges every circle to cover its returns, and drops circles centred near the
+tracked person. Every reported circle contains the returns it was fitted to, so the union
+covers the seen surface. docs/model.md, section 9, describes the steps and their limits.
 """
 
 from __future__ import annotations

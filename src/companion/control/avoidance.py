@@ -1,26 +1,11 @@
 """Behavioural-dynamics obstacle avoidance (paper Sec. 3.3, Eq. 17-20), for any controller.
 
-For every obstacle inside its influence range (``rho_ob < rho_o``) the robot gets an angular
-acceleration (Eq. 17, after Fajen and Warren)
-
-    A_ob = -eta * phi * exp(-c1 |phi|) * exp(-c2 rho_ob)
-
-with ``phi`` the obstacle's bearing in the robot frame (wrapped to (-pi, pi]; phi > 0 means on
-the left, which turns the robot right). The accelerations are summed (Eq. 19) and integrated
-into an angular-velocity offset ``u_ob`` that is added to the wrapped controller's omega
-(Eq. 20). This layer only steers; keeping clear of obstacles and the person is the safety
-supervisor's duty (:mod:`companion.control.keepout`). Choices where the paper is silent
-(docs/model.md, section 8):
-
-* ``rho_ob`` is the clearance: distance from the robot's footprint (a circle of
-  ``robot.radius`` around the wheel axle) to the obstacle surface; ``phi`` is the bearing of
-  the obstacle's nearest surface point from the robot centre;
-* only obstacles ahead count (``|phi| < avoidance.field_of_view``), as for a walking person;
-* ``u_ob`` is a leaky integral: ``du_ob/dt = sum A_ob - u_ob / decay_time``, integrated
-  exactly over each period, so it returns to zero after the robot leaves the range;
-* ``u_ob`` is clipped to the headroom the controller's omega leaves under ``omega_max`` and the
-  integrator stores the clipped value (no wind-up); the wrapped controller's own output is
-  passed on unchanged, so its memory of the applied input stays exact.
+Every obstacle within its influence range and ahead gives an angular acceleration
+``A_ob = -eta phi exp(-c1 |phi|) exp(-c2 rho_ob)`` (Eq. 17, phi > 0 on the left turns right);
+their sum (Eq. 19) is integrated with a leak into ``u_ob``, which is added to the wrapped
+controller's omega (Eq. 20) within the headroom ``omega_max`` leaves. This layer only steers:
+keeping clear is the safety supervisor's duty (:mod:`companion.control.keepout`).
+docs/model.md, section 8, gives the choices where the paper is silent.
 """
 
 from __future__ import annotations

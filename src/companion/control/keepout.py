@@ -27,6 +27,7 @@ import numpy as np
 from companion._jit import jitable, kernel
 from companion.geometry import (
     ObstacleArrays,
+    clearance,
     min_clearance,
     obstacle_arrays,
     segment_point,
@@ -73,13 +74,13 @@ def obstacle_normals(robot: Pose, obstacles: Sequence[Obstacle], radius: float
     skipped)."""
     for ob in obstacles:
         if isinstance(ob, Circle):
-            cx, cy, inner = ob.x, ob.y, ob.radius
+            cx, cy = ob.x, ob.y
         else:
-            (cx, cy), inner = segment_point(robot.x, robot.y, ob.x0, ob.y0, ob.x1, ob.y1), 0.0
+            cx, cy = segment_point(robot.x, robot.y, ob.x0, ob.y0, ob.x1, ob.y1)
         dx, dy = robot.x - cx, robot.y - cy
         dist = math.hypot(dx, dy)
         if dist >= 1e-9:
-            yield dx / dist, dy / dist, dist - inner - radius
+            yield dx / dist, dy / dist, clearance(ob, robot.x, robot.y, radius)
 
 
 def clip_to(v: float, bounds: Iterable[tuple[float, float]], v_max: float) -> float:

@@ -1,33 +1,10 @@
-"""PID baseline companion controller (in the spirit of Sun et al. [6] and Yao et al. [13]).
+"""PID baseline companion controller (after Sun et al. [6] and Yao et al. [13]).
 
-The controlled point is the robot's reference point R (``robot.d`` ahead of the axle); its
-setpoint is the slot ``S = h + rho_d e(theta_h + alpha_d)`` (:mod:`companion.control.slot`).
-Errors, in the robot frame:
-
-* ``e_x = e(theta).(S - R)`` (slot ahead of R: positive), ``e_y = e_perp(theta).(S - R)``
-  (slot to the left: positive);
-* ``e_theta = wrap(theta_h - beta_ref - theta)``, the heading error against the heading that
-  holds the slot (:func:`companion.model.slot_reference`; ``beta_ref = 0`` on a straight walk).
-
-Control law (two decoupled channels, standard for a differential-drive tracker)::
-
-    v     = e(theta).S_dot + kp_x e_x + I_x + kd_x D_x
-    omega = omega_h        + kp_y e_y + I_y + kd_y D_y + kp_theta e_theta
-
-* feedforward: the slot velocity projected on the robot heading, and the person's turn rate;
-  at the slot-holding equilibrium both are exactly the input that holds the slot;
-* ``I = clamp(I + k_i e dt, +-i_limit)``, frozen while the channel is saturated (or, for v, cut by
-  the keep-out barrier around the controller) in the direction the error would push it
-  (conditional integration + clamping anti-windup);
-* ``D`` is the derivative on measurement: the measured deviation of R from S has setpoint 0, so
-  its backward difference ``(e_k - e_{k-1}) / dt`` passed through a first-order low-pass filter
-  (time constant ``pid.derivative_tau``, discretised by backward Euler) has no setpoint kick; it
-  is 0 on the first step after ``reset``.
-
-The angular channel steers R laterally through the offset ``d`` (``R_dot.e_perp = d omega``) and
-damps the heading: linearised on a straight walk at speed ``V`` the lateral loop has the
-characteristic polynomial ``s^2 + (kp_y d + kp_theta) s + kp_y V``, stable for positive gains
-when walking forward.
+Two channels regulate the reference point R onto the slot S: ``v`` from the error ahead,
+``omega`` from the error to the left and the heading error against the slot-holding heading,
+each with feedforward, a clamped and conditionally frozen integral (anti-windup, also when an
+outer layer cut ``v``) and a filtered derivative on measurement. docs/baselines.md gives the
+law and its tuning.
 """
 
 from __future__ import annotations

@@ -1,17 +1,9 @@
-"""Slot geometry shared by the baseline controllers (PID, VSM, IC).
+"""Slot geometry shared by the baseline controllers (docs/baselines.md, "Common geometry").
 
-Notation (world frame, ``e(a) = (cos a, sin a)``, ``e_perp(a) = (-sin a, cos a)``):
-
-* reference point of the robot ``R = p + d e(theta)`` (Eq. 2);
-* desired slot point ``S = h + rho_d e(theta_h + alpha_d)``;
-* slot velocity, from the person's velocity ``(v_h, omega_h)``:
-  ``S_dot = v_h e(theta_h) + rho_d omega_h e_perp(theta_h + alpha_d)``;
-* offset-point kinematics: ``R_dot = v e(theta) + d omega e_perp(theta)``, inverted (``d > 0``) by
-  ``v = e(theta).V``, ``omega = e_perp(theta).V / d`` for a desired velocity ``V`` of R.
-
-At the equilibrium of a person walking with constant ``(v_h, omega_h)`` (robot in its slot with
-the heading of :func:`companion.model.slot_reference`), mapping ``V = S_dot`` through the inverse
-kinematics gives exactly the input that holds the slot: ``(v_ref, omega_h)``.
+R is the robot's reference point, S the desired slot ``h + rho_d e(theta_h + alpha_d)`` and
+``S_dot`` its velocity from the person's ``(v_h, omega_h)``; the offset-point kinematics map a
+desired velocity of R to ``(v, omega)`` and back. At the slot-holding equilibrium, mapping
+``S_dot`` gives exactly the input that holds the slot.
 """
 
 from __future__ import annotations

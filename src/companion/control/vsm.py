@@ -1,25 +1,9 @@
-"""Virtual spring model (VSM) baseline companion controller (after Morioka et al. [15] and
-Hu et al. [16]).
+"""Virtual spring model (VSM) baseline (after Morioka et al. [15] and Hu et al. [16]).
 
-A virtual spring-damper joins the robot's reference point R to the slot S
-(:mod:`companion.control.slot`) and pulls a virtual mass ``m`` located at R::
-
-    F = k (S - R) - c (R_dot - S_dot)
-    V = R_dot + (dt / m) F            (one explicit Euler step of m R_ddot = F)
-    v = e(theta).V,   omega = e_perp(theta).V / d
-
-* ``S_dot`` is the slot velocity computed from the person's velocity ``(v_h, omega_h)``;
-* ``R_dot`` is the velocity of R under the robot's last command as actually sent (after the
-  avoidance and keep-out layers, reported through :meth:`VsmController.applied`), at the current
-  heading. The virtual mass therefore always starts from the robot's real velocity: saturation
-  cannot wind up the virtual state. After ``reset`` (no command yet) the robot is assumed to move
-  with the slot (``R_dot = S_dot``, a bumpless start);
-* the heading is not controlled directly: with ``d > 0`` it follows from the offset-point
-  kinematics (it turns towards the direction R moves in).
-
-In the slot of a person walking straight, ``F = 0`` and ``V = S_dot``: the law holds the
-formation exactly. Like any spring law, the isotropic spring treats the distance to the
-person and the position along the walk alike.
+A spring-damper between R and the slot S pulls a virtual mass at R; one explicit Euler step
+gives the velocity of R, mapped to ``(v, omega)`` by the offset-point kinematics. The mass
+starts from the velocity of the command actually sent (:meth:`applied`), so saturation cannot
+wind it up. docs/baselines.md gives the law and its tuning.
 """
 
 from __future__ import annotations

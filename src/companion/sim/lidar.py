@@ -1,25 +1,11 @@
 """A simulated planar (2D) LiDAR: exact, vectorised ray casting against the world's obstacles.
 
-The sensor sits at the robot's pose (the wheel-axle centre, see
-:class:`~companion.types.Pose`) and casts one ray per beam. Each ray is intersected in
-closed form with every circle, every wall segment and the person's body (a circle of radius
-:attr:`LidarParams.person_radius` around the person's position); the nearest hit is the
-beam's range. Walls have zero thickness (their centre-line, as in :mod:`companion.geometry`).
-
-Conventions
-
-* Beam angles are in the robot frame (0 = straight ahead, counter-clockwise positive),
-  increasing and centred on the heading. A limited field of view is covered by
-  ``2 * floor(fov / 2 / resolution) + 1`` beams ``k * resolution`` (so there is always a
-  beam at 0). A full circle (``fov == 2*pi``) is covered by an even number ``n`` of beams
-  ``-pi + k * 2*pi / n`` (the step is the resolution rounded so that it divides the circle;
-  there is a beam at -pi and at 0 but none at +pi, so no direction is sampled twice).
-* ``ranges`` is ``inf`` where nothing is hit within ``range_max``. NaN never comes out of
-  :func:`cast`; it is reserved for invalid returns injected by fault tests, and consumers
-  (:mod:`companion.perception`) treat it as "no return".
-* A ray that starts inside a circle (the robot overlaps a pillar or the person) returns
-  range 0: the obstacle is touching the sensor. A ray starting on a wall segment likewise
-  returns 0.
+One ray per beam from the robot's pose, intersected in closed form with every circle, wall
+segment (zero thickness) and the person's body (a circle); the nearest hit is the range.
+Beam angles are in the robot frame, increasing and centred on the heading (a full circle has
+an even number of beams from -pi, none at +pi). Ranges are ``inf`` where nothing is hit within
+``range_max`` and 0 for a ray starting inside a circle; NaN never comes out of :func:`cast`
+(it marks invalid returns in fault tests).
 """
 
 from __future__ import annotations
@@ -30,7 +16,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from companion.geometry import TWO_PI, wall_clearance
+from companion.geometry import TWO_PI, circle_clearance, wall_clearance
 from companion.params import LidarParams
 from companion.types import Circle, Pose, Scan, Wall
 
@@ -150,7 +136,8 @@ def cast(pose: Pose, circles: Sequence[Circle], walls: Sequence[Wall],
         cr.append(params.person_radius)
     if cx:
         cx_, cy_, cr_ = (np.asarray(v, float) for v in (cx, cy, cr))
-        near = np.hypot(cx_ - ox, cy_ - oy) - cr_ <= params.range_max   # cull out-of-range
+        near = np.array([circle_clearance(ox, oy, x, y, r) <= params.range_max  # cull
+                         for x, y, r in zip(cx, cy, cr)])
         if near.any():
             ranges = np.minimum(ranges, _ray_circles(ox, oy, dirs, cx_[near], cy_[near],
                                                      cr_[near]))

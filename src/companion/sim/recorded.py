@@ -1,28 +1,9 @@
 """A person driven by recorded positions: :class:`RecordedPerson` and :func:`load_person_csv`.
 
-A recording holds only positions ``(t, x, y)``, possibly at an irregular rate. Heading, speed
-and turn rate are derived from a cubic smoothing spline of ``x(t)`` and ``y(t)``
-(:func:`scipy.interpolate.make_smoothing_spline`), tabulated once on a dense time grid, and
-interpolated linearly on that grid by :meth:`RecordedPerson.state`.
-
-Smoothing rule
---------------
-The spline minimises ``sum_i w_i (p_i - f(t_i))^2 + lam * integral f''(t)^2 dt`` with the
-weights ``w_i`` set to the time each sample stands for (half the distance to its neighbours), so
-the data term approximates ``integral (p - f)^2 dt`` whatever the sampling, and with
-``lam = tau^4`` for a smoothing time constant ``tau`` in seconds. Away from the ends this is
-a linear filter with gain ``1 / (1 + (w * tau)^4)`` at angular frequency ``w`` (rad/s): motion
-slower than ``1/tau`` passes almost unchanged, faster wiggles are removed, independently of
-the sample rate.
-
-The default ``tau = 0.5 s`` is chosen for the ETH/UCY pedestrian tracks, which are linear
-interpolations between hand-annotated points about 1.2 s apart, sampled every 0.4 s: finite
-differences (and the interpolating spline) jump by up to ~0.5 rad in heading at each joint.
-Those joints repeat at about 5 rad/s, where the filter gain is ~1/50, while a person turning at
-1 rad/s keeps 94 % of the turn rate (a 3 m circle at 1 m/s: > 99.9 %). scipy's default,
-``lam`` by generalised cross-validation (GCV), is *not* used: on those tracks it picks
-``tau`` of about 0.04-0.2 s (it sees noise-free data and nearly interpolates), which keeps the
-kinks.
+A recording holds only positions ``(t, x, y)``, at any rate. Heading, speed and turn rate
+come from a cubic smoothing spline of x(t) and y(t) with time-proportional weights and
+``lam = tau^4``, a low-pass filter with time constant ``tau`` (default 0.5 s) whatever the
+sample rate, tabulated once on a dense grid (docs/model.md, section 7, explains the choice).
 """
 
 from __future__ import annotations
