@@ -132,7 +132,7 @@ def test_bad_usage_exits_2_with_one_line(argv, message, capsys, tmp_path):
     ('[person]\nkind = "line"\n[[obstacles]]\nkind = "wall"\nstart = [1, 1]\nend = [1, 1]\n',
      "obstacles[0]: expected a wall of positive length"),
     ('obstacle_source = "radar"\n[person]\nkind = "line"\n',
-     "obstacle_source: expected 'truth' or 'lidar'"),
+     "obstacle_source: expected one of truth, lidar"),
 ])
 def test_bad_scenario_file(tmp_path, capsys, text, message):
     f = tmp_path / "bad.toml"

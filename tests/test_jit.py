@@ -3,7 +3,7 @@
 
 import os
 import shutil
-from pathlib import Path
+import time
 
 import numba.core.config
 
@@ -29,19 +29,22 @@ def test_any_source_change_gives_a_new_digest(tmp_path):
 
 def test_default_cache_stays_inside_the_package(monkeypatch):
     monkeypatch.delenv("NUMBA_CACHE_DIR")
-    path = _jit.cache_dir()
-    assert path.parent == _jit.PACKAGE / "__pycache__" / "numba"
-    assert not path.is_relative_to(Path.home() / ".cache")
+    assert _jit.cache_dir().parent == _jit.PACKAGE / "__pycache__" / "numba"
 
 
-def test_prune_removes_only_older_caches_of_the_package(tmp_path):
+def test_prune_removes_only_stale_caches_of_the_package(tmp_path):
     base = _jit.PACKAGE / "__pycache__" / "numba"
-    old = base / "000000000000"
-    old.mkdir(parents=True, exist_ok=True)
+    stale, recent = base / "000000000000", base / "000000000001"
+    for path in (stale, recent):
+        path.mkdir(parents=True, exist_ok=True)
+    long_ago = time.time() - 2 * _jit.STALE_AFTER
+    os.utime(stale, (long_ago, long_ago))
     _jit.prune(base / _jit.source_digest())
-    assert not old.exists()
+    assert not stale.exists() and recent.exists()   # recent: perhaps still in use
+    shutil.rmtree(recent)
     outside = tmp_path / "000000000000"
     outside.mkdir()
+    os.utime(outside, (long_ago, long_ago))
     _jit.prune(tmp_path / _jit.source_digest())     # not the package's folder: left alone
     assert outside.exists()
 

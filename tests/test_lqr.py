@@ -6,8 +6,6 @@ closed form of K from P and the optimality of u = -K x, rather than stored numbe
 
 from __future__ import annotations
 
-# Small matrices: OpenBLAS threading only adds overhead, and on a loaded machine it makes
-# expm / solve_discrete_are ~100x slower. Effective only if numpy is not imported yet.
 import dataclasses
 import math
 

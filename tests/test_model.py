@@ -7,8 +7,6 @@ an exact equilibrium, and the discretisations against closed forms.
 
 from __future__ import annotations
 
-# Small matrices: OpenBLAS threading only adds overhead, and on a loaded machine it makes
-# expm / solve_discrete_are ~100x slower. Effective only if numpy is not imported yet.
 import math
 
 import numpy as np

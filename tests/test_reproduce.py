@@ -57,3 +57,27 @@ def test_table2_matches_single_runs(out, tmp_path, trajectory, controller):
 
 def test_paper_table_is_complete():
     assert len(PAPER_TABLE2) == 12
+
+
+def _rows(path):
+    with open(path) as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_the_figures_quoted_in_the_readme_and_docs(out):
+    """The README's and docs/reproduction.md's headline numbers, to their printed precision."""
+    t2 = {(r["trajectory"], r["controller"]): r for r in _rows(out / "table2.csv")}
+    for (traj, ctl), rho_cm, alpha in ((("8-shaped", "lqr"), 0.911, 0.0080),
+                                       (("8-shaped", "lqr-paper"), 12.726, 0.2984),
+                                       (("8-shaped", "vsm"), 0.064, 0.0022),
+                                       (("Circle", "lqr"), 0.404, 0.0036),
+                                       (("Circle", "lqr-paper"), 12.091, 0.5081)):
+        row = t2[(traj, ctl)]
+        assert float(row["rmse_rho_m"]) * 100 == pytest.approx(rho_cm, abs=5e-4), (traj, ctl)
+        assert float(row["rmse_alpha_rad"]) == pytest.approx(alpha, abs=5e-5), (traj, ctl)
+    fig4 = {r["controller"]: r for r in _rows(out / "fig4.csv")}
+    assert all(r["obstacle_collisions"] == "0" for r in fig4.values())
+    assert float(fig4["lqr"]["min_obstacle_clearance_m"]) == pytest.approx(0.117, abs=5e-4)
+    assert float(fig4["lqr"]["rmse_rho_m"]) * 100 == pytest.approx(33.9, abs=0.05)
+    assert float(fig4["vsm"]["rmse_rho_m"]) * 100 == pytest.approx(30.5, abs=0.05)
+    assert float(fig4["lqr"]["rmse_alpha_rad"]) == pytest.approx(0.192, abs=5e-4)

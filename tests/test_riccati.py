@@ -216,7 +216,7 @@ def test_controller_gain_uses_the_configured_solver():
 @pytest.mark.parametrize("scenario", ["figure8", "circle", "line"])
 @pytest.mark.parametrize("name", ["lqr", "lqr-paper"])
 def test_compiled_controller_equals_the_scipy_controller_in_closed_loop(scenario, name):
-    """The compiled step and the Python step with scipy's gain drive the same episode: every
+    """The controller with the compiled solver and with scipy's drive the same episode: every
     logged state and command agrees to 1e-8 (bare controller, started off the slot)."""
     sc = load_scenario(scenario)
     entry = CONTROLLERS[name]

@@ -11,8 +11,9 @@ numba checks a cached kernel against its own source file only, and a kernel inli
 jitable functions of other modules, so a change to those would leave a stale kernel. The
 cache therefore lives in a directory named after a hash of every source file of the package
 (docs/performance.md): ``$NUMBA_CACHE_DIR`` if set, else ``__pycache__/numba/<hash>`` inside
-the package, else (package not writable) the system's temporary directory. Importing
-companion sets numba's cache directory for the whole process and its children.
+the package (caches of other sources untouched for an hour are removed), else (package not
+writable) the system's temporary directory. Importing companion sets numba's cache directory
+for the whole process and its children.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import hashlib
 import os
 import shutil
 import tempfile
+import time
 from pathlib import Path
 
 from numba import njit
@@ -79,12 +81,17 @@ def cache_dir() -> Path:
     return Path(tempfile.gettempdir()) / f"companion-numba-{os.getuid()}" / digest
 
 
+#: Caches of other sources untouched for this long (s) are removed (a process still running
+#: older sources keeps its cache meanwhile).
+STALE_AFTER = 3600.0
+
+
 def prune(path: Path) -> None:
-    """Remove the caches of older sources beside ``path`` in the package's own folder."""
+    """Remove stale caches of other sources beside ``path`` in the package's own folder."""
     if path.parent != PACKAGE / "__pycache__" / "numba":
         return
     for old in path.parent.iterdir():
-        if old != path and old.is_dir():
+        if old != path and old.is_dir() and time.time() - old.stat().st_mtime > STALE_AFTER:
             shutil.rmtree(old, ignore_errors=True)
 
 

@@ -23,7 +23,9 @@ TWO_PI = 2.0 * math.pi
 
 @jitable
 def wrap_pi(angle: float) -> float:
-    """Wrap an angle to (-pi, pi]."""
+    """Wrap an angle to (-pi, pi]; an angle already in that range is returned unchanged."""
+    if -math.pi < angle <= math.pi:
+        return angle
     a = (angle + math.pi) % TWO_PI   # [0, 2*pi]: Python's modulo, also in compiled code
     if a == 0.0:
         a = TWO_PI
@@ -32,13 +34,17 @@ def wrap_pi(angle: float) -> float:
 
 def wrap_pi_array(angle: np.ndarray) -> np.ndarray:
     """:func:`wrap_pi` elementwise, for arrays (the same operations)."""
-    a = (np.asarray(angle, dtype=float) + math.pi) % TWO_PI
-    return np.where(a == 0.0, TWO_PI, a) - math.pi
+    angle = np.asarray(angle, dtype=float)
+    a = (angle + math.pi) % TWO_PI
+    a = np.where(a == 0.0, TWO_PI, a) - math.pi
+    return np.where((angle > -math.pi) & (angle <= math.pi), angle, a)
 
 
 @jitable
 def wrap_2pi(angle: float) -> float:
-    """Wrap an angle to [0, 2*pi)."""
+    """Wrap an angle to [0, 2*pi); an angle already in that range is returned unchanged."""
+    if 0.0 <= angle < TWO_PI:
+        return angle
     a = angle % TWO_PI
     # the modulo of a tiny negative number can round to exactly 2*pi
     return 0.0 if a >= TWO_PI else a

@@ -25,6 +25,7 @@ from companion.config import (
     validate,
 )
 from companion.errors import ConfigError
+from companion.geometry import TWO_PI
 
 LEFT = 0.5 * math.pi
 BEHIND = math.pi
@@ -32,7 +33,6 @@ RIGHT = 1.5 * math.pi
 FRONT = 0.0
 #: Side names accepted for ``formation.bearing``.
 SIDES = {"left": LEFT, "right": RIGHT, "behind": BEHIND, "front": FRONT}
-TWO_PI = 2.0 * math.pi
 
 
 def _sample_period(x: float) -> str | None:
@@ -365,8 +365,22 @@ def side_to_bearing(value: Any, name: str) -> Any:
     return value
 
 
+#: Keys that moved to another section: old name -> new name (named in the error).
+MOVED = {"safety": "keepout", "supervisor.protective_distance": "keepout.protective_distance",
+         "supervisor.person_accel": "keepout.person_accel"}
+
+
+def _reject_moved(mapping: Mapping[str, Any], prefix: str) -> None:
+    for old, new in MOVED.items():
+        section, _, key = old.partition(".")
+        table = mapping.get(section)
+        if table is not None and (not key or (isinstance(table, Mapping) and key in table)):
+            raise ConfigError(f"{prefix}{old}: moved to {new} (docs/parameters.md)")
+
+
 def params_from_mapping(mapping: Mapping[str, Any], prefix: str = "") -> Params:
     """Build validated :class:`Params` from a parsed TOML mapping."""
+    _reject_moved(mapping, prefix)
     mapping = dict(mapping)
     formation = mapping.get("formation")
     if isinstance(formation, Mapping) and "bearing" in formation:

@@ -16,8 +16,10 @@ from companion.control.keepout import (
     braking_speed,
     evasive_target,
     rollout_margins,
+    speed_up_distance,
 )
-from companion.geometry import obstacle_arrays, unicycle_step
+from companion.control.person_gate import predict
+from companion.geometry import clearance, obstacle_arrays, unicycle_step
 from companion.params import Params
 from companion.types import Circle, PersonState, Pose, Wall
 
@@ -100,6 +102,44 @@ def test_compiled_rollout_equals_its_python_source(pose, current, person, circle
     np.testing.assert_allclose(_rollout_margins(*pose, *current, targets, spec, obstacles),
                                rollout_margins(*pose, *current, targets, spec, obstacles),
                                rtol=1e-12, atol=1e-12)
+
+
+def oracle_margins(pose, current, targets, person, obstacles, p=P, horizon=1.2, step=0.1):
+    """What the evasive rollout should predict, composed from the object-level functions."""
+    s, k = p.supervisor, p.keepout
+    out = []
+    for tv, tw in targets:
+        x, y, th = pose
+        margin = math.inf
+        for n in range(1, int(round(horizon / step)) + 1):
+            t = n * step
+            rate = min(s.accel_max, s.decel_max)
+            v = current[0] + min(max(tv - current[0], -rate * t), rate * t)
+            w = current[1] + min(max(tw - current[1], -s.angular_accel_max * t),
+                                 s.angular_accel_max * t)
+            x, y, th = unicycle_step(x, y, th, v, w, step)
+            h = predict(person, t)
+            extra = speed_up_distance(person.v, k.person_accel, t)
+            hx, hy = h.x + extra * math.cos(person.theta), h.y + extra * math.sin(person.theta)
+            margin = min([margin, math.hypot(x - hx, y - hy) - k.protective_distance]
+                         + [clearance(o, x, y, p.robot.radius) for o in obstacles])
+        out.append(margin)
+    return np.array(out)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.tuples(*[st.floats(-3, 3)] * 3), st.tuples(st.floats(-1.5, 1.5), st.floats(-1, 1)),
+       st.tuples(*[st.floats(-3, 3)] * 3, st.floats(-0.5, 2.0), st.floats(-2, 2)),
+       st.lists(st.tuples(st.floats(-3, 3), st.floats(-3, 3), st.floats(0, 1)), max_size=3),
+       st.lists(st.tuples(*[st.floats(-3, 3)] * 4), max_size=2))
+def test_rollout_predicts_what_the_object_level_functions_give(pose, current, person, circles,
+                                                               walls):
+    obstacles = [Circle(*c) for c in circles] + [Wall(*w) for w in walls]
+    targets = np.random.default_rng(1).uniform(-1.5, 1.5, (8, 2))
+    h = PersonState(*person)
+    np.testing.assert_allclose(
+        _rollout_margins(*pose, *current, targets, _spec(h), obstacle_arrays(obstacles)),
+        oracle_margins(pose, current, targets, h, obstacles), rtol=1e-9, atol=1e-9)
 
 
 def test_rollout_margin_of_standing_still_is_the_gap_to_a_standing_person_and_a_wall():

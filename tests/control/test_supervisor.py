@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from companion.control import SafetySupervisor, make_controller
+from companion.control import AvoidingController, SafetySupervisor, make_controller
 from companion.control.checks import Clock
 from companion.control.limits import limit_rate
 from companion.control.person_gate import PersonGate, predict
@@ -229,10 +229,11 @@ def test_fault3_persistent_switch_stops_then_reacquires():
 # -- fault 4: bad time steps ------------------------------------------------------------------
 
 class Spy:
-    """A controller that records resets and steps and always asks for full speed."""
+    """A controller that records resets, steps and what it is told was applied, and always
+    asks for full speed."""
 
     def __init__(self):
-        self.resets, self.times = 0, []
+        self.resets, self.times, self.told = 0, [], []
 
     def reset(self):
         self.resets += 1
@@ -242,7 +243,22 @@ class Spy:
         return Command(1.5, 1.0)
 
     def applied(self, cmd):
-        pass
+        self.told.append(cmd)
+
+
+def test_applied_is_called_once_per_step_with_the_final_command():
+    """Through the whole stack (supervisor, avoidance layer, controller) the controller is told
+    exactly once per step what was finally sent, and nothing when it was not stepped."""
+    spy = Spy()
+    sup = SafetySupervisor(AvoidingController(spy, P), P)
+    h = PersonState(-3.0, 0.0, 0.0, 0.0, 0.0)
+    ahead = (Circle(1.0, 0.1, 0.3),)                  # avoidance and barrier both act
+    finals = [sup.step(Observation(k * DT, Pose(0.0, 0.0, 0.0), h, ahead)) for k in range(20)]
+    assert len(spy.told) == len(spy.times) == 20
+    assert [(c.v, c.omega, c.u_ob) for c in spy.told] == [(c.v, c.omega, c.u_ob) for c in finals]
+    assert any(c.u_ob != 0.0 for c in finals)
+    sup.step(Observation(math.nan, Pose(0.0, 0.0, 0.0), h, ahead))   # not stepped: not told
+    assert len(spy.told) == 20
 
 
 @pytest.mark.parametrize("bad_t", [0.5, 0.4, math.nan, math.inf])   # zero, negative, not finite
@@ -271,6 +287,19 @@ def test_fault4_long_step_resets_filters_without_a_jump():
     b = sup.step(Observation(10.0, Pose(0.0, 0.0, 0.0), h))   # 200 periods late
     assert spy.resets == resets + 1 and "clock_gap" in b.reason
     assert abs(b.v - a.v) <= S.accel_max * DT + EPS          # no huge integration
+
+
+def test_fault4_a_held_command_still_obeys_the_keep_out_rules():
+    """On a clock fault the last command is held, but the obstacle barrier still slows it."""
+    sup = SafetySupervisor(Spy(), P)
+    h = PersonState(0.0, 5.0, 0.0, 0.0, 0.0)
+    wall = (Circle(0.75, 0.0, 0.2),)          # 0.3 m clearance ahead: barrier allows 0.4 m/s
+    sup.step(Observation(0.0, Pose(0.0, 0.0, 0.0), h, wall))
+    sup.applied(Command(0.475, 0.0))
+    held = sup.step(Observation(0.0, Pose(0.0, 0.0, 0.0), h, wall))     # zero time step
+    assert "clock" in held.reason.split("+")
+    allowed = P.keepout.barrier_rate * (0.3 - P.keepout.obstacle_clearance)
+    assert held.v == pytest.approx(allowed)
 
 
 @pytest.mark.parametrize("kind", ["clock_freeze", "clock_backward", "stall"])
@@ -341,6 +370,14 @@ def test_fault7_obstacle_inside_the_footprint_stops():
     assert {c.status for c in cmds} == {"stopped"}
     assert all(c.reason == "obstacle_in_footprint" for c in cmds)
     assert cmds[-1].v == 0.0 and cmds[-1].omega == 0.0
+
+
+@pytest.mark.parametrize("obstacle", [Circle(0.0, 0.0, 0.1), Wall(-1.0, 0.0, 1.0, 0.0)])
+def test_fault7_obstacle_right_at_the_robot_centre_stops(obstacle):
+    sup = make_controller("lqr", P)
+    cmd = sup.step(Observation(0.0, Pose(0.0, 0.0, 0.0), PersonState(0.25, 1.0, 0.0, 1.0, 0.0),
+                               (obstacle,)))
+    assert cmd.status == "stopped" and cmd.reason == "obstacle_in_footprint"
 
 
 def _scan(ranges):

@@ -25,6 +25,7 @@ from companion.config import load_toml
 from companion.control import lookup
 from companion.data import pedestrians
 from companion.errors import CompanionError
+from companion.geometry import wrap_2pi
 from companion.io import save_figure, write_csv, write_json
 from companion.params import SIDES, Params, params_from_mapping
 from companion.sim import convergence, soak
@@ -76,7 +77,7 @@ def _overrides(args: argparse.Namespace) -> dict:
         formation["bearing"] = args.side
     if args.bearing is not None:
         (bearing,) = _floats(args.bearing, 1, "--bearing")
-        formation["bearing"] = bearing % (2.0 * math.pi)
+        formation["bearing"] = wrap_2pi(bearing)
     if args.distance is not None:
         formation["distance"] = _positive(args.distance, "--distance")
     if formation:
@@ -143,6 +144,9 @@ def output_dir(path: Path, stale: Sequence[str] = ()) -> Path:
     except OSError as exc:
         raise UsageError(f"--out {path}: cannot write there ({exc.strerror})") from None
     return path
+
+
+tqdm.monitor_interval = 0   # no monitor thread: the runner forks worker processes
 
 
 @contextmanager

@@ -95,19 +95,17 @@ class LqrController:
         self._last: tuple | None = None        # (xi, gain, (v_d, omega_d), beta_d)
 
     @property
-    def rest_gain(self) -> np.ndarray:
-        """Fallback gain while no stabilising gain has been found (a copy)."""
-        return self._rest_gain.copy()
-
-    @property
     def u_e_prev(self) -> tuple[float, float]:
         """``u_e(k-1)``: the last applied input minus its feedforward."""
         return self._u_e
 
     @property
     def last(self) -> LqrStep | None:
-        """Diagnostics of the last step (None before the first)."""
-        return None if self._last is None else LqrStep(*self._last)
+        """Diagnostics of the last step (None before the first; copies)."""
+        if self._last is None:
+            return None
+        xi, gain, u_d, beta_d = self._last
+        return LqrStep(xi.copy(), gain.copy(), u_d, beta_d)
 
     def reference(self, v_h: float, omega_h: float) -> tuple[float, float, float]:
         """``(beta_d, v_d, omega_d)`` of the configured feedforward for a person velocity."""

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+from companion.control.checks import finite
 from companion.geometry import unicycle_step, wrap_pi
 from companion.params import SupervisorParams
 from companion.types import PersonState
@@ -19,11 +20,6 @@ def predict(person: PersonState, tau: float) -> PersonState:
     """The person ``tau`` seconds on at constant speed and turn rate (exact unicycle arc)."""
     x, y, th = unicycle_step(person.x, person.y, person.theta, person.v, person.omega, tau)
     return PersonState(x, y, wrap_pi(th), person.v, person.omega)
-
-
-def person_is_finite(person: PersonState) -> bool:
-    return all(math.isfinite(x) for x in (person.x, person.y, person.theta, person.v,
-                                           person.omega))
 
 
 class PersonGate:
@@ -66,7 +62,7 @@ class PersonGate:
         if h is None:
             reasons.append("person_missing")
             return
-        if not person_is_finite(h):
+        if not finite(h.x, h.y, h.theta, h.v, h.omega):
             reasons.append("person_invalid")
             return
         v = min(max(h.v, -s.max_person_speed), s.max_person_speed)

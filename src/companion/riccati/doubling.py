@@ -103,12 +103,6 @@ def _lu_solve(lu, piv, b, n, m):
             b[i, j] /= d
 
 
-
-# Fixed sizes: the augmented model has NX = 5 states and NU = 2 inputs, Q and R are diagonal.
-# The call tree is kept flat (dare_gain_nb calls every part itself): numba compiles each
-# function with all the code it calls linked in and optimised again, so every level of
-# nesting costs compilation time again.
-
 @njit(**_INNER)
 def _sda(a, b, q_diag, r_diag, h, ws):
     """Structure-preserving doubling for the DARE of ``a`` (5, 5), ``b`` (5, 2), ``Q =
@@ -349,8 +343,6 @@ def dare_gain(a, b, q_diag, r_diag, p, k):
         return GAIN_FAILED, iterations
     _closed_loop(a, b, k, ws[0])
     return _radius_status(ws[0], 1.0 - RADIUS_MARGIN, ws[1], ws[2], NX), iterations
-
-
 
 
 def spectral_radius_below(m, bound: float) -> bool:

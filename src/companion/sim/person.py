@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
+from companion.geometry import wrap_pi
 from companion.types import PersonState
 
 
@@ -222,6 +223,6 @@ class ScriptedWalk:
         a, b = self._rows[i], self._rows[i + 1]
         if s >= len(self._rows) - 1:
             x, y, th, _, _ = self._rows[-1]
-            return PersonState(x, y, math.remainder(th, 2.0 * math.pi), 0.0, 0.0)
+            return PersonState(x, y, wrap_pi(th), 0.0, 0.0)
         x, y, th, v = (a[j] + frac * (b[j] - a[j]) for j in range(4))
-        return PersonState(x, y, math.remainder(th, 2.0 * math.pi), v, b[4])
+        return PersonState(x, y, wrap_pi(th), v, b[4])

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import multiprocessing
 import os
+import sys
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
@@ -113,7 +114,8 @@ def run_many(specs: Sequence[EpisodeSpec], workers: int | None = None,
     warm_up()
     # Several chunks per worker keep every worker busy to the end.
     chunk = max(1, math.ceil(len(specs) / (4 * workers)))
-    context = multiprocessing.get_context("fork") if os.name == "posix" else None
+    # fork (Linux) hands the workers the loaded kernels; elsewhere the platform's default
+    context = multiprocessing.get_context("fork") if sys.platform.startswith("linux") else None
     with ProcessPoolExecutor(max_workers=min(workers, len(specs)), mp_context=context) as pool:
         for result in pool.map(job, specs, chunksize=chunk):
             results.append(result)

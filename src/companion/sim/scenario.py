@@ -66,7 +66,7 @@ from companion.sim.faults import Fault, faults_from_list
 from companion.sim.person import Figure8, PersonMotion, Segment, SegmentPath, circle, line, u_shape
 from companion.sim.recorded import RecordedPerson, gap_faults, load_person_csv
 from companion.sim.runner import EpisodeSpec, run_one
-from companion.sim.sensing import OBSTACLE_SOURCES
+from companion.sim.sensing import check_source
 from companion.types import Circle, Log, Obstacle, Pose, Wall
 
 Triple = tuple[float, float, float]
@@ -296,10 +296,7 @@ def scenario_from_mapping(data: Mapping[str, Any], source: str, base_dir: Path,
     params_map = _resolve_auto_side(dict(params_map), start, person, where)
     params = params_from_mapping(params_map, prefix=f"{where}params.")
     obstacles = obstacles_from_list(data.get("obstacles", []), where)
-    obstacle_source = data.get("obstacle_source", "truth")
-    if obstacle_source not in OBSTACLE_SOURCES:
-        raise ConfigError(f"{where}obstacle_source: expected 'truth' or 'lidar', "
-                          f"got {obstacle_source!r}")
+    obstacle_source = check_source(data.get("obstacle_source", "truth"), where)
     faults = faults_from_list(data.get("faults", []), f"{where}faults")
     if isinstance(person, RecordedPerson):   # gaps in a recording are outages (fault 1)
         faults += gap_faults(person, params.supervisor.person_timeout)

@@ -82,11 +82,16 @@ class LidarPerception:
 OBSTACLE_SOURCES = ("truth", "lidar")
 
 
+def check_source(source: str, where: str = "") -> str:
+    """``source`` if it is one of :data:`OBSTACLE_SOURCES`, else a ConfigError naming it."""
+    if source not in OBSTACLE_SOURCES:
+        raise ConfigError(f"{where}obstacle_source: expected one of "
+                          f"{', '.join(OBSTACLE_SOURCES)}, got {source!r}")
+    return source
+
+
 def make_perception(source: str, params: Params) -> Perception:
     """The perception of ``source``, one of :data:`OBSTACLE_SOURCES`."""
-    if source == "truth":
+    if check_source(source) == "truth":
         return GroundTruth()
-    if source == "lidar":
-        return LidarPerception(params)
-    raise ConfigError(f"obstacle_source: expected one of {', '.join(OBSTACLE_SOURCES)}, "
-                      f"got {source!r}")
+    return LidarPerception(params)
