@@ -138,7 +138,7 @@ def peak_rss_mb() -> float:
     return max(own, children) / 1024.0   # Linux reports kB
 
 
-def run(n_episodes: int = 16, duration: float = 60.0, workers: int | None = None,
+def run(n_episodes: int = 48, duration: float = 60.0, workers: int | None = None,
         first_step: bool = True, progress: Callable[[str], None] = lambda s: None) -> dict:
     """All figures of ``companion bench`` as a JSON-ready dict (module docstring); episodes
     last ``duration`` s."""

@@ -121,8 +121,8 @@ def parser() -> argparse.ArgumentParser:
                         "stack, full-stack throughput, first-step time and memory "
                         "(docs/performance.md)")
     bn.add_argument("--json", action="store_true", help="print the figures as JSON")
-    bn.add_argument("--episodes", type=int, default=16,
-                    help="figure-8 episodes in the throughput measurement (default 16)")
+    bn.add_argument("--episodes", type=int, default=48,
+                    help="figure-8 episodes in the throughput measurement (default 48)")
     bn.add_argument("--duration", default="60", metavar="S",
                     help="simulated time per episode in s (default 60)")
     bn.add_argument("--no-first-step", action="store_true",
