@@ -45,8 +45,14 @@ def test_bad_person_csv(tmp_path, capsys, row, where, words):
     ("[supervisor]\nprotective_distance = 0.4\n",
      ["p.toml: supervisor.protective_distance: moved to keepout.protective_distance"]),
     ('dt = "fast"\n', ["p.toml: dt: expected a number", "'fast'"]),
-    ("[supervisor]\nperson_timeout = -0.5\n", ["p.toml: supervisor.person_timeout",
-                                                "expected a finite positive number"]),
+    ("[tracker]\nlost_after_s = -0.5\n", ["p.toml: tracker.lost_after_s",
+                                           "expected a finite positive number"]),
+    ("[supervisor]\nperson_timeout = 0.5\n",
+     ["p.toml: supervisor.person_timeout: moved to tracker.lost_after_s"]),
+    ("[sensing]\nperson_rate = 10\n", ["p.toml: sensing.person_rate", "person_rate_hz"]),
+    ("[sensing]\nperson_dropout = 1.0\n", ["p.toml: sensing.person_dropout",
+                                            "a probability in [0, 1)"]),
+    ("[lidar]\nrate = 10\n", ["p.toml: lidar.rate: moved to sensing.lidar_rate_hz"]),
     ("[supervisor]\nmin_valid_returns = 1.5\n", ["p.toml: supervisor.min_valid_returns",
                                                   "fraction in [0, 1]"]),
     ("[robot]\nv_max = nan\n", ["p.toml: robot.v_max: expected a number, got nan"]),
@@ -84,13 +90,14 @@ def test_bad_faults_in_a_scenario(tmp_path, capsys, faults, words):
 
 def test_scenario_faults_run_and_show_in_the_log(tmp_path, capsys):
     f = tmp_path / "s.toml"
-    f.write_text('duration = 8.0\n[person]\nkind = "line"\n'
+    f.write_text('duration = 16.0\n[person]\nkind = "line"\n'
                  '[[faults]]\nkind = "person_dropout"\nstart = 2.0\nend = 5.0\n')
     code, out, _ = run(["run", str(f), "--out", str(tmp_path / "o")], capsys)
     assert code == 0
     text = (tmp_path / "o" / "log.csv").read_text().splitlines()
     assert text[0].endswith(",status,reason")
     assert any(",stopped,person_lost" in line for line in text)
+    assert any(",degraded,slot_error" in line for line in text)   # catching up: far behind
     assert text[-1].endswith(",ok,")
 
 
@@ -108,3 +115,32 @@ def test_outputs_are_written_whole_or_not_at_all(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["table.csv"]   # no temporary left
     io.write_csv(target, ("a", "b"), [(1.0, "x")])
     assert target.read_text() == "a,b\n1,x\n"
+
+
+@pytest.mark.parametrize("flag, text, words", [
+    ("fast", None, ["--sensing: expected ideal or realistic or a .toml file", "'fast'"]),
+    ("FILE", "person_rate_hz = 10\nperson_noise = 0.1\n",
+     ["sens.toml: person_noise: unknown key", "did you mean", "person_position_noise_m"]),
+    ("FILE", "person_latency_s = -0.1\n", ["sens.toml: person_latency_s", "expected"]),
+    ("FILE", "person_rate_hz = \"ten\"\n", ["sens.toml: person_rate_hz: expected a number"]),
+])
+def test_bad_sensing_flag_or_file(tmp_path, capsys, flag, text, words):
+    f = tmp_path / "sens.toml"
+    if text is not None:
+        f.write_text(text)
+    code, _, err = run(["run", "line", "--sensing", str(f) if flag == "FILE" else flag,
+                        "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and err.count("\n") == 1, err
+    assert all(w in err for w in words), err
+    assert not (tmp_path / "o").exists()
+
+
+def test_bad_sensing_table_in_a_scenario_names_the_file_and_key(tmp_path, capsys):
+    f = tmp_path / "s.toml"
+    f.write_text('duration = 2.0\nsensing = "realistc"\n[person]\nkind = "line"\n')
+    code, _, err = run(["run", str(f), "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and "s.toml: sensing" in err and "realistic" in err, err
+    f.write_text('duration = 2.0\n[sensing]\nactuator_tau = 0.2\n[person]\nkind = "line"\n')
+    code, _, err = run(["run", str(f), "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and "s.toml: sensing.actuator_tau: unknown key" in err, err
+    assert not (tmp_path / "o").exists()

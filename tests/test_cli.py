@@ -236,3 +236,28 @@ def test_a_reader_that_goes_away_ends_the_command_quietly_with_every_file_writte
     assert done.returncode == 0 and done.stderr == ""
     assert sorted(p.name for p in out.iterdir()) == ["errors.png", "inputs.png", "log.csv",
                                                       "metrics.json", "trajectory.png"]
+
+
+def test_run_with_realistic_sensing_logs_the_estimate(tmp_path, capsys):
+    code, out, _ = run(["run", "line", "--duration", "4", "--sensing", "realistic", "--out",
+                        str(tmp_path)], capsys)
+    assert code == 0
+    header = (tmp_path / "log.csv").read_text().splitlines()[0].split(",")
+    for name in ("person_est_x", "person_est_y", "person_est_theta", "person_est_v",
+                 "person_est_omega", "person_est_std", "robot_v", "robot_omega"):
+        assert name in header
+    assert "realistic" in out
+
+
+def test_scenario_sensing_table_is_used_and_the_flag_overrides_it(tmp_path, capsys):
+    f = tmp_path / "s.toml"
+    f.write_text('duration = 3.0\n[sensing]\nperson_rate_hz = 5.0\nperson_dropout = 0.0\n'
+                 '[person]\nkind = "line"\n')
+    assert run(["run", str(f), "--out", str(tmp_path / "a")], capsys)[0] == 0
+    assert run(["run", str(f), "--sensing", "ideal", "--out", str(tmp_path / "b")],
+               capsys)[0] == 0
+    a = (tmp_path / "a" / "log.csv").read_text().splitlines()
+    b = (tmp_path / "b" / "log.csv").read_text().splitlines()
+    std = a[0].split(",").index("person_est_std")
+    assert float(a[-1].split(",")[std]) > 0.0       # 5 Hz noisy detections: uncertain
+    assert float(b[-1].split(",")[std]) == 0.0      # ideal: exact

@@ -1,13 +1,18 @@
-"""`companion reproduce`: files written, and its Table 2 equals re-running single scenarios."""
+"""`companion reproduce`: files written, and its Tables 2 and 3 equal re-running single
+scenarios."""
 
 import csv
 import json
 
+import numpy as np
 import pytest
 
+from companion import metrics
+from companion.apps import table3
 from companion.apps.cli import main
 from companion.apps.reproduce import PAPER_TABLE2, TABLE2_COLUMNS, TRAJECTORIES
 from companion.control import CONTROLLERS
+from companion.sim.runner import run_one
 
 
 @pytest.fixture(scope="module")
@@ -18,9 +23,10 @@ def out(tmp_path_factory):
 
 
 def test_files(out):
-    for name in ("table2.csv", "table2.md", "fig3.csv", "fig4.csv", "fig3_0.5mps.png",
-                 "fig3_1mps.png", "fig4a_trajectories.png", "fig4b_errors.png", "fig4c_inputs.png",
-                 "fig4d_avoidance.png", "fig7a_trajectories.png", "fig7d_avoidance.png"):
+    for name in ("table2.csv", "table2.md", "table3.csv", "table3.md", "fig3.csv", "fig4.csv",
+                 "fig3_0.5mps.png", "fig3_1mps.png", "fig4a_trajectories.png", "fig4b_errors.png",
+                 "fig4c_inputs.png", "fig4d_avoidance.png", "fig7a_trajectories.png",
+                 "fig7d_avoidance.png"):
         assert (out / name).stat().st_size > 0, name
     assert not list(out.glob(".*.tmp"))
 
@@ -81,3 +87,21 @@ def test_the_figures_quoted_in_the_readme_and_docs(out):
     assert float(fig4["lqr"]["rmse_rho_m"]) * 100 == pytest.approx(33.9, abs=0.05)
     assert float(fig4["vsm"]["rmse_rho_m"]) * 100 == pytest.approx(30.5, abs=0.05)
     assert float(fig4["lqr"]["rmse_alpha_rad"]) == pytest.approx(0.192, abs=5e-4)
+
+
+def test_table3_is_the_mean_of_realistic_runs_of_every_controller(out):
+    rows = _rows(out / "table3.csv")
+    assert tuple(rows[0]) == table3.COLUMNS
+    assert {(r["trajectory"], r["controller"]) for r in rows} == {
+        (t, c) for t in table3.EXPERIMENTS for c in CONTROLLERS}
+    assert all(int(r["runs"]) == len(table3.SEEDS) for r in rows)
+    md = (out / "table3.md").read_text()
+    assert "0.226" in md and "0.068" in md                # the paper's numbers beside ours
+    # the LQR's U-shaped row is the mean of its seeds run one at a time, with realistic sensing
+    jobs = [spec for traj, ctl, spec in table3.jobs(["lqr"]) if traj == "U-shaped"]
+    assert all(spec.params.sensing.actuator_tau_s > 0 for spec in jobs)
+    single = [metrics.compute(run_one(spec)) for spec in jobs]
+    row = next(r for r in rows if r["trajectory"] == "U-shaped" and r["controller"] == "lqr")
+    for key in table3.METRICS:
+        assert float(row[key]) == pytest.approx(np.mean([m[key] for m in single]), rel=1e-9)
+    assert float(row["min_person_distance_m"]) >= 0.5

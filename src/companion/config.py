@@ -47,6 +47,18 @@ def non_negative(x: float) -> str | None:
     return None if 0.0 <= x < math.inf else "a finite number >= 0"
 
 
+def positive_or_inf(x: float) -> str | None:
+    return None if x > 0.0 else "a positive number (inf allowed)"
+
+
+def fraction(x: float) -> str | None:
+    return None if 0.0 <= x <= 1.0 else "a fraction in [0, 1]"
+
+
+def at_least_one(n: int) -> str | None:
+    return None if n >= 1 else "an integer >= 1"
+
+
 def all_positive(xs: tuple[float, ...]) -> str | None:
     return None if all(0.0 < x < math.inf for x in xs) else "all entries finite and positive"
 

@@ -36,18 +36,47 @@ class PersonState:
 class PersonDetection:
     """One detection of a person by a sensor (LiDAR legs, camera, UWB, a magnetic tag).
 
-    ``t`` is the time the person was seen (s), ``x``, ``y`` the position (m) in the named
-    ``frame``; ``heading`` (rad) and the 2x2 position ``covariance`` (m^2) are optional, and
-    ``track_id`` is the detector's own label, if it has one.
+    ``t`` is the time the person was seen (s, not when the detection arrived), ``x``, ``y``
+    the position (m) in the named ``frame`` ("world", the frame of the robot pose, or "robot",
+    the robot's own frame at time ``t``). Optional: the position ``covariance`` (2x2, row-major,
+    m^2), the ``heading`` (rad, world frame) with ``heading_std``, the ``speed`` (m/s) and
+    ``turn_rate`` (rad/s) with ``velocity_std`` (an upstream tracker, a tag with an IMU), and
+    the detector's own ``track_id``. A missing std means the tracker's default; a std of 0
+    means exact.
     """
 
     t: float
     x: float
     y: float
     frame: str = "world"
-    heading: float | None = None
     covariance: tuple[float, float, float, float] | None = None
+    heading: float | None = None
+    heading_std: float | None = None
+    speed: float | None = None
+    turn_rate: float | None = None
+    velocity_std: tuple[float, float] | None = None
     track_id: int | None = None
+
+
+@dataclass(frozen=True)
+class PersonEstimate:
+    """The tracker's estimate of the person at one instant.
+
+    ``state`` is the kinematic estimate (moving forwards, speed >= 0), what safety reasons
+    about; ``walker`` the state the formation is defined on: the same, but a standing person
+    (too slow for positions to tell a heading) faces the way it last walked, without speed or
+    turning. Also: the standard deviation of the position (m, the larger axis of its 2x2
+    covariance), the 5x5 covariance of the tracker's state (x, y, vx, vy, omega), the time
+    since the last accepted detection (s) and the track's status, "seen" or "predicted"
+    (coasting over missing detections).
+    """
+
+    state: PersonState
+    position_std: float
+    covariance: np.ndarray
+    age: float
+    status: str
+    walker: PersonState
 
 
 @dataclass(frozen=True)
@@ -93,20 +122,25 @@ class Scan:
 
 @dataclass(frozen=True)
 class Observation:
-    """What a controller sees at one sample: time (s), robot pose, person state, the
-    obstacles known at that time (world frame) and the LiDAR scan they came from (None without
-    a LiDAR).
+    """What the robot knows at one sample: time (s), robot pose, the person, the obstacles
+    known at that time (world frame), the LiDAR scan they came from (None without a LiDAR),
+    the robot's measured velocity ``(v, omega)`` from odometry (None: unknown) and the person
+    detections that arrived since the last sample.
 
-    Raw data may be missing (``person`` None) or corrupt (NaN, Inf, time going backwards);
-    only the safety supervisor accepts such observations and hands the layers inside it a
-    checked one.
+    The standard stack's input is the detections: its safety supervisor tracks the person
+    from them and hands the layers inside it ``person``, the estimate. A ``person`` given to
+    the stack is taken as an exact detection at ``t`` (an ideal sensor). Raw data may be
+    missing or corrupt (NaN, Inf, time going backwards); only the supervisor accepts such
+    observations and hands the layers inside it a checked one.
     """
 
     t: float
     robot: Pose
-    person: PersonState | None
+    person: PersonState | None = None
     obstacles: tuple[Obstacle, ...] = ()
     scan: Scan | None = None
+    robot_velocity: tuple[float, float] | None = None
+    detections: tuple[PersonDetection, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -114,7 +148,8 @@ class Command:
     """Robot input: linear velocity v (m/s) and angular velocity omega (rad/s).
 
     ``u_ob`` (rad/s) is the part of omega that obstacle avoidance added. ``status`` ("ok",
-    "degraded" or "stopped") and ``reason`` (empty when ok) are set by the safety supervisor.
+    "degraded" or "stopped"), ``reason`` (empty when ok) and ``estimate`` (the person estimate
+    the command was made for) are set by the safety supervisor.
     """
 
     v: float
@@ -122,14 +157,20 @@ class Command:
     u_ob: float = 0.0
     status: str = "ok"
     reason: str = ""
+    estimate: PersonEstimate | None = None
 
 
 LOG_COLUMNS = ("t", "robot_x", "robot_y", "robot_theta", "person_x", "person_y",
                "person_theta", "person_v", "person_omega", "rho", "alpha", "beta",
-               "rho_d", "alpha_d", "beta_ref", "v", "omega", "u_ob", "rho_ob")
-"""Numeric columns of an episode log. ``beta_ref``: heading offset that holding the slot
-needs; ``u_ob``: the avoidance part of omega (rad/s); ``rho_ob``: clearance (m) from the
-robot's footprint to the nearest true obstacle surface (NaN without obstacles)."""
+               "rho_d", "alpha_d", "beta_ref", "v", "omega", "u_ob", "rho_ob",
+               "robot_v", "robot_omega", "person_est_x", "person_est_y", "person_est_theta",
+               "person_est_v", "person_est_omega", "person_est_std")
+"""Numeric columns of an episode log: the true state of robot and person, the relative state,
+``beta_ref`` (heading offset that holding the slot needs), the command (``v``, ``omega``),
+``u_ob`` (the avoidance part of omega, rad/s), ``rho_ob`` (clearance from the robot's
+footprint to the nearest true obstacle surface, m; NaN without obstacles), the robot's actual
+velocity (``robot_v``, ``robot_omega``; behind the command by the actuator lag) and the
+tracker's estimate of the person with its position std (NaN without one)."""
 
 TEXT_COLUMNS = ("status", "reason")
 """The safety supervisor's status and reason per sample ("ok" and "" without one)."""

@@ -15,13 +15,15 @@ from companion.control.keepout import (
     braking_bound,
     braking_speed,
     evasive_target,
+    heading_std,
     rollout_margins,
     speed_up_distance,
 )
-from companion.control.person_gate import predict
 from companion.geometry import clearance, obstacle_arrays, unicycle_step
-from companion.params import Params
-from companion.types import Circle, PersonState, Pose, Wall
+from companion.params import REALISTIC, Params
+from companion.sim.episode import lagged
+from companion.tracking import predict
+from companion.types import Circle, PersonEstimate, PersonState, Pose, Wall
 
 P = Params()
 
@@ -83,33 +85,54 @@ def test_braking_bound_stops_at_the_protective_distance_and_lets_the_robot_leave
     assert "protective_zone" in reasons
 
 
-def _spec(person, p=P, horizon=1.2, step=0.1):
+def test_an_uncertain_person_is_kept_farther_away_and_the_lag_counts_as_reaction_time():
+    person = PersonState(0.0, 0.0, 0.0, 0.0, 0.0)
+    pose, grow = Pose(-3.0, 0.0, 0.0), 0.15
+    for _ in range(200):
+        v = braking_bound(1.5, pose, person, (), P, [], grow=grow)
+        pose = Pose(*unicycle_step(pose.x, pose.y, pose.theta, v, 0.0, P.dt))
+    assert -pose.x == pytest.approx(P.keepout.protective_distance + grow, abs=0.02)
+    lagged = P.replace(sensing=REALISTIC)          # 0.2 s of actuator lag
+    far = Pose(-1.5, 0.0, 0.0)
+    assert braking_bound(1.5, far, person, (), lagged, []) \
+        < braking_bound(1.5, far, person, (), P, []) - 0.2
+
+
+def _spec(person, p=P, horizon=1.2, step=0.1, lag=0.0, spread=0.0):
     s, k = p.supervisor, p.keepout
     return Rollout(person.x, person.y, person.theta, person.v, person.omega, k.person_accel,
                    k.protective_distance, p.robot.radius, min(s.accel_max, s.decel_max),
-                   s.angular_accel_max, step, int(round(horizon / step)))
+                   s.angular_accel_max, step, int(round(horizon / step)), lag, spread)
+
+
+LAG_SPREAD = st.tuples(st.sampled_from((0.0, 0.2)), st.sampled_from((0.0, 0.3)))
 
 
 @settings(max_examples=50, deadline=None)
 @given(st.tuples(*[st.floats(-3, 3)] * 3), st.tuples(st.floats(-1.5, 1.5), st.floats(-1, 1)),
        st.tuples(*[st.floats(-3, 3)] * 3, st.floats(-0.5, 2.0), st.floats(-2, 2)),
        st.lists(st.tuples(st.floats(-3, 3), st.floats(-3, 3), st.floats(0, 1)), max_size=3),
-       st.lists(st.tuples(*[st.floats(-3, 3)] * 4), max_size=2))
-def test_compiled_rollout_equals_its_python_source(pose, current, person, circles, walls):
+       st.lists(st.tuples(*[st.floats(-3, 3)] * 4), max_size=2), LAG_SPREAD)
+def test_compiled_rollout_equals_its_python_source(pose, current, person, circles, walls,
+                                                   lag_spread):
     obstacles = obstacle_arrays([Circle(*c) for c in circles] + [Wall(*w) for w in walls])
     targets = np.random.default_rng(0).uniform(-1.5, 1.5, (36, 2))
-    spec = _spec(PersonState(*person))
+    spec = _spec(PersonState(*person), lag=lag_spread[0], spread=lag_spread[1])
     np.testing.assert_allclose(_rollout_margins(*pose, *current, targets, spec, obstacles),
                                rollout_margins(*pose, *current, targets, spec, obstacles),
                                rtol=1e-12, atol=1e-12)
 
 
-def oracle_margins(pose, current, targets, person, obstacles, p=P, horizon=1.2, step=0.1):
+def oracle_margins(pose, current, targets, person, obstacles, p=P, horizon=1.2, step=0.1,
+                   lag=0.0, spread=0.0):
     """What the evasive rollout should predict, composed from the object-level functions."""
     s, k = p.supervisor, p.keepout
+    people = [dataclasses.replace(person, theta=person.theta + j * spread)
+              for j in ((-1, 0, 1) if spread else (0,))]
     out = []
     for tv, tw in targets:
         x, y, th = pose
+        va, wa = current
         margin = math.inf
         for n in range(1, int(round(horizon / step)) + 1):
             t = n * step
@@ -117,12 +140,15 @@ def oracle_margins(pose, current, targets, person, obstacles, p=P, horizon=1.2, 
             v = current[0] + min(max(tv - current[0], -rate * t), rate * t)
             w = current[1] + min(max(tw - current[1], -s.angular_accel_max * t),
                                  s.angular_accel_max * t)
-            x, y, th = unicycle_step(x, y, th, v, w, step)
-            h = predict(person, t)
-            extra = speed_up_distance(person.v, k.person_accel, t)
-            hx, hy = h.x + extra * math.cos(person.theta), h.y + extra * math.sin(person.theta)
-            margin = min([margin, math.hypot(x - hx, y - hy) - k.protective_distance]
-                         + [clearance(o, x, y, p.robot.radius) for o in obstacles])
+            va, wa = (lagged(va, v, lag, step)[0], lagged(wa, w, lag, step)[0]) if lag \
+                else (v, w)
+            x, y, th = unicycle_step(x, y, th, va, wa, step)
+            for h0 in people:
+                h = predict(h0, t)
+                extra = speed_up_distance(h0.v, k.person_accel, t)
+                hx, hy = h.x + extra * math.cos(h0.theta), h.y + extra * math.sin(h0.theta)
+                margin = min(margin, math.hypot(x - hx, y - hy) - k.protective_distance)
+            margin = min([margin] + [clearance(o, x, y, p.robot.radius) for o in obstacles])
         out.append(margin)
     return np.array(out)
 
@@ -131,15 +157,18 @@ def oracle_margins(pose, current, targets, person, obstacles, p=P, horizon=1.2, 
 @given(st.tuples(*[st.floats(-3, 3)] * 3), st.tuples(st.floats(-1.5, 1.5), st.floats(-1, 1)),
        st.tuples(*[st.floats(-3, 3)] * 3, st.floats(-0.5, 2.0), st.floats(-2, 2)),
        st.lists(st.tuples(st.floats(-3, 3), st.floats(-3, 3), st.floats(0, 1)), max_size=3),
-       st.lists(st.tuples(*[st.floats(-3, 3)] * 4), max_size=2))
+       st.lists(st.tuples(*[st.floats(-3, 3)] * 4), max_size=2), LAG_SPREAD)
 def test_rollout_predicts_what_the_object_level_functions_give(pose, current, person, circles,
-                                                               walls):
+                                                               walls, lag_spread):
     obstacles = [Circle(*c) for c in circles] + [Wall(*w) for w in walls]
     targets = np.random.default_rng(1).uniform(-1.5, 1.5, (8, 2))
     h = PersonState(*person)
+    lag, spread = lag_spread
     np.testing.assert_allclose(
-        _rollout_margins(*pose, *current, targets, _spec(h), obstacle_arrays(obstacles)),
-        oracle_margins(pose, current, targets, h, obstacles), rtol=1e-9, atol=1e-9)
+        _rollout_margins(*pose, *current, targets, _spec(h, lag=lag, spread=spread),
+                         obstacle_arrays(obstacles)),
+        oracle_margins(pose, current, targets, h, obstacles, lag=lag, spread=spread),
+        rtol=1e-9, atol=1e-9)
 
 
 def test_rollout_margin_of_standing_still_is_the_gap_to_a_standing_person_and_a_wall():
@@ -160,3 +189,32 @@ def test_evasive_target_replaces_a_command_into_the_person_only():
     assert evade is not None and evade[0] < 1.0
     far = PersonState(10.0, 5.0, 0.0, 1.0, 0.0)
     assert evasive_target(Pose(0.0, 0.0, 0.0), (0.0, 0.0), (1.0, 0.0), far, (), P) is None
+
+
+def test_an_uncertain_heading_makes_the_evasive_check_plan_for_a_turn_towards_the_robot():
+    """A person 0.8 m to the robot's left, walking alongside: safe if it keeps its heading,
+    not if it may be walking 0.5 rad towards the robot (a turn the detections show late)."""
+    person = PersonState(0.0, 0.8, 0.0, 1.2, 0.0)
+    robot, nominal = Pose(0.0, 0.0, 0.0), (1.2, 0.0)
+    assert evasive_target(robot, nominal, nominal, person, (), P) is None
+    evade = evasive_target(robot, nominal, nominal, person, (), P, spread=0.5)
+    assert evade is not None and evade[1] < 0.0           # turns away, to the right
+
+
+def test_the_actuator_lag_shrinks_the_predicted_margin_of_a_late_evasion():
+    person = PersonState(2.0, 0.0, math.pi, 1.0, 0.0)     # walks at the robot
+    escape = np.array([[-1.5, 0.0]])                       # reverse at full speed
+    free = _rollout_margins(0.0, 0.0, 0.0, 0.0, 0.0, escape, _spec(person), obstacle_arrays([]))
+    slow = _rollout_margins(0.0, 0.0, 0.0, 0.0, 0.0, escape, _spec(person, lag=0.2),
+                            obstacle_arrays([]))
+    assert slow[0] < free[0] - 0.05
+
+
+def test_heading_std_of_an_estimate():
+    cov = np.zeros((5, 5))
+    cov[2:4, 2:4] = np.diag((0.04, 0.01))                 # 0.1 m/s across a walk along x
+    est = PersonEstimate(PersonState(0.0, 0.0, 0.0, 1.0, 0.0), 0.05, cov, 0.0, "seen",
+                         PersonState(0.0, 0.0, 0.0, 1.0, 0.0))
+    assert heading_std(est) == pytest.approx(0.1)
+    standing = dataclasses.replace(est, state=PersonState(0.0, 0.0, 0.0, 0.0, 0.0))
+    assert heading_std(standing) == 0.0

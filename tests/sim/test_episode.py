@@ -3,10 +3,11 @@ import math
 import numpy as np
 import pytest
 
-from companion.control import make_controller
+from companion.control import make_bare, make_controller
+from companion.errors import ConfigError
 from companion.geometry import unicycle_step, wrap_pi, wrap_pi_array
-from companion.params import Params
-from companion.sim.episode import SensorNoise, run_episode
+from companion.params import REALISTIC, Params
+from companion.sim.episode import lagged, run_episode
 from companion.sim.person import Figure8, circle, line
 from companion.types import LOG_COLUMNS, TEXT_COLUMNS
 
@@ -41,14 +42,50 @@ def test_log_columns_and_length():
     assert log["t"][-1] == pytest.approx(1.95)
 
 
-def test_noise_is_deterministic_under_seed():
-    p = Params()
-    noise = SensorNoise(position=0.02, heading=0.02)
+def test_realistic_sensing_is_deterministic_under_seed():
+    p = Params(sensing=REALISTIC)
     person = circle((0.0, 0.0, 0.0), 3.0, 1.0)
-    runs = [run_episode(make_controller("lqr", p), person, p, 5.0, seed=s, noise=noise)
-            for s in (7, 7, 8)]
-    np.testing.assert_array_equal(runs[0]["v"], runs[1]["v"])
+    runs = [run_episode(make_controller("lqr", p), person, p, 5.0, seed=s) for s in (7, 7, 8)]
+    assert runs[0].equals(runs[1])
     assert not np.array_equal(runs[0]["v"], runs[2]["v"])
+
+
+def test_the_base_follows_the_command_through_its_lag():
+    p = Params(sensing=REALISTIC)
+    tau, dt = p.sensing.actuator_tau_s, p.dt
+    log = run_episode(make_controller("lqr", p), Figure8(60.0), p, 3.0)
+    a = math.exp(-dt / tau)
+    for k in range(len(log) - 1):
+        v_next = log["v"][k] + (log["robot_v"][k] - log["v"][k]) * a
+        assert log["robot_v"][k + 1] == pytest.approx(v_next, abs=1e-12)
+        v_mean = lagged(log["robot_v"][k], log["v"][k], tau, dt)[1]
+        w_mean = lagged(log["robot_omega"][k], log["omega"][k], tau, dt)[1]
+        x, y, _ = unicycle_step(log["robot_x"][k], log["robot_y"][k], log["robot_theta"][k],
+                                v_mean, w_mean, dt)
+        assert (x, y) == pytest.approx((log["robot_x"][k + 1], log["robot_y"][k + 1]),
+                                       abs=1e-12)
+    # the mean over a period of a lag from 0 towards 1: 1 - tau / dt (1 - e^(-dt / tau))
+    assert lagged(0.0, 1.0, tau, dt)[1] == pytest.approx(1.0 - tau / dt * (1.0 - a))
+    assert lagged(0.3, 1.0, 0.0, dt) == (1.0, 1.0)
+
+
+def test_the_log_holds_the_estimate_beside_the_truth():
+    ideal = run_episode(make_controller("lqr", Params()), Figure8(60.0), Params(), 3.0)
+    for name in ("x", "y", "theta", "v", "omega"):
+        np.testing.assert_allclose(ideal[f"person_est_{name}"], ideal[f"person_{name}"],
+                                   atol=1e-12)
+    assert np.all(ideal["person_est_std"] == 0.0)
+    p = Params(sensing=REALISTIC)
+    log = run_episode(make_controller("lqr", p), Figure8(60.0), p, 10.0, seed=1)
+    err = np.hypot(log["person_est_x"] - log["person_x"], log["person_est_y"] - log["person_y"])
+    assert 0.005 < np.sqrt(np.mean(err ** 2)) < 0.1
+    assert np.all((log["person_est_std"] > 0.01) & (log["person_est_std"] < 0.15))
+
+
+def test_a_bare_controller_needs_ideal_sensing():
+    p = Params(sensing=REALISTIC)
+    with pytest.raises(ConfigError, match="sensing: a controller without the standard stack"):
+        run_episode(make_bare("lqr", p), line((0.0, 0.0, 0.0), 1.0), p, 1.0)
 
 
 @pytest.mark.parametrize("side, bearing", [("left", 0.5 * math.pi), ("right", 1.5 * math.pi),

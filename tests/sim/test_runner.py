@@ -5,8 +5,7 @@ import pytest
 
 from companion import metrics
 from companion.errors import ConfigError
-from companion.params import Params
-from companion.sim.episode import SensorNoise
+from companion.params import REALISTIC, Params
 from companion.sim.faults import Fault
 from companion.sim.person import Figure8, line
 from companion.sim.runner import EpisodeSpec, run_many, run_one
@@ -20,8 +19,8 @@ def specs():
     fig4 = load_scenario("fig4")
     return [
         EpisodeSpec("lqr", Figure8(60.0), P, 6.0, start=Pose(5.5, 1.5, 0.3)),
-        EpisodeSpec("pid", line((0.0, 0.0, 0.0), 1.0), P, 4.0, seed=3,
-                    noise=SensorNoise(position=0.05, heading=0.05)),
+        EpisodeSpec("pid", line((0.0, 0.0, 0.0), 1.0), P.replace(sensing=REALISTIC), 4.0,
+                    seed=3),
         EpisodeSpec("vsm", line((0.0, 0.0, 0.0), 1.0), P, 4.0,
                     faults=(Fault("person_dropout", 1.0, 2.0),)),
         EpisodeSpec("ic", Figure8(60.0), P, 5.0, obstacles=(Circle(5.5, 2.0, 0.2),)),

@@ -29,6 +29,11 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"companion: error: {self.prog}: {message} (see --help)\n")
 
 
+def _sensing(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--sensing", metavar="PROFILE", help="ideal, realistic or a TOML file of "
+                   "sensing keys (docs/sensing.md); default: the scenario's, else ideal")
+
+
 def _workers(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, metavar="N",
                    help="worker processes for the episodes (default: one per CPU)")
@@ -61,6 +66,7 @@ def parser() -> argparse.ArgumentParser:
     run.add_argument("--out", metavar="DIR", help="output folder (default out/SCENARIO)")
     run.add_argument("--plot", action="store_true", help="also write trajectory.png, "
                      "errors.png, inputs.png (and avoidance.png when there are obstacles)")
+    _sensing(run)
     run.set_defaults(func=c.cmd_run)
 
     rp = sub.add_parser("reproduce", help="the paper's Fig. 3, Table 2, Fig. 4 and Fig. 7")
@@ -74,6 +80,7 @@ def parser() -> argparse.ArgumentParser:
     tn.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     tn.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
     _workers(tn)
+    _sensing(tn)
     tn.set_defaults(func=c.cmd_tune)
 
     sc = sub.add_parser("scenarios", help="list the built-in scenarios")
@@ -90,13 +97,16 @@ def parser() -> argparse.ArgumentParser:
     cv.add_argument("--out", metavar="DIR", help="output folder (default out/convergence)")
     cv.add_argument("--plot", action="store_true", help="write the Fig. 3 panels as PNG")
     _workers(cv)
+    _sensing(cv)
     cv.set_defaults(func=c.cmd_convergence)
 
     pd = sub.add_parser("pedestrians", help="our controller beside real walkers (ETH/UCY)")
     pd.add_argument("--data", metavar="DIR", help="folder of the ETH/UCY files (default: "
                     "../shared/data/pedestrians or $COMPANION_PEDESTRIANS)")
-    pd.add_argument("--controller", default="lqr", choices=sorted(CONTROLLERS))
-    pd.add_argument("--side", choices=sorted(SIDES), help="side (default: left)")
+    pd.add_argument("--controller", default="lqr", choices=sorted(CONTROLLERS) + ["all"],
+                    help="a controller, or all of them on the same runs (default lqr)")
+    pd.add_argument("--side", default="both", choices=sorted(SIDES) + ["both"],
+                    help="side of the person (default: both, one run each)")
     pd.add_argument("--min-speed", type=float, default=0.6, metavar="MPS",
                     help="only tracks with a higher mean speed (default 0.6 m/s)")
     pd.add_argument("--min-duration", type=float, default=15.0, metavar="S",
@@ -104,6 +114,7 @@ def parser() -> argparse.ArgumentParser:
     pd.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
     pd.add_argument("--out", metavar="DIR", help="output folder (default out/pedestrians)")
     _workers(pd)
+    _sensing(pd)
     pd.set_defaults(func=c.cmd_pedestrians)
 
     sk = sub.add_parser("soak", help="long run of a random walker among obstacles "
@@ -115,6 +126,7 @@ def parser() -> argparse.ArgumentParser:
     sk.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
     sk.add_argument("--log", action="store_true", help="also write log.csv")
     sk.add_argument("--out", metavar="DIR", help="output folder (default out/soak)")
+    _sensing(sk)
     sk.set_defaults(func=c.cmd_soak)
 
     bn = sub.add_parser("bench", help="step latency per controller alone and in the full "

@@ -15,19 +15,18 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-import numpy as np
 from tqdm import tqdm
 
 from companion import metrics
-from companion.apps import benchmark, plots, reproduce, tune
-from companion.apps.pedestrians import evaluate_tracks
+from companion.apps import benchmark, plots, reproduce, table3, tune
+from companion.apps import pedestrians as walkers
 from companion.config import load_toml
-from companion.control import lookup
+from companion.control import CONTROLLERS, lookup
 from companion.data import pedestrians
 from companion.errors import CompanionError
 from companion.geometry import wrap_2pi
 from companion.io import save_figure, write_csv, write_json
-from companion.params import SIDES, Params, params_from_mapping
+from companion.params import Params, load_sensing, params_from_mapping
 from companion.sim import convergence, soak
 from companion.sim.recorded import load_person_csv
 from companion.sim.runner import run_many
@@ -58,10 +57,16 @@ def _positive(text: str, what: str) -> float:
 
 
 def params_arg(args: argparse.Namespace) -> Params:
-    """Table 1 defaults, or the ``--params FILE`` given, validated with the file's name."""
-    if not args.params:
-        return Params()
-    return params_from_mapping(load_toml(args.params), prefix=f"{args.params}: ")
+    """Table 1 defaults, or the ``--params FILE`` given, validated with the file's name, with
+    the ``--sensing`` given."""
+    params = Params() if not args.params else params_from_mapping(
+        load_toml(args.params), prefix=f"{args.params}: ")
+    return with_sensing(params, args)
+
+
+def with_sensing(params: Params, args: argparse.Namespace) -> Params:
+    sensing = getattr(args, "sensing", None)
+    return params if sensing is None else params.replace(sensing=load_sensing(sensing))
 
 
 def _overrides(args: argparse.Namespace) -> dict:
@@ -100,6 +105,7 @@ def build_scenario(args: argparse.Namespace) -> Scenario:
         changes["duration"] = _positive(args.duration, "--duration")
     if args.obstacles:
         changes["obstacle_source"] = args.obstacles
+    changes["params"] = with_sensing(sc.params, args)
     return dataclasses.replace(sc, **changes)
 
 
@@ -250,9 +256,8 @@ def cmd_convergence(args: argparse.Namespace) -> int:
 
 def cmd_pedestrians(args: argparse.Namespace) -> int:
     params = params_arg(args)
-    if args.side:
-        params = params.replace(formation=dataclasses.replace(
-            params.formation, bearing=SIDES[args.side]))
+    controllers = list(CONTROLLERS) if args.controller == "all" else [args.controller]
+    sides = ("left", "right") if args.side == "both" else (args.side,)
     tracks = pedestrians.select_tracks(pedestrians.load_scenes(args.data),
                                        min_mean_speed=args.min_speed,
                                        min_duration=args.min_duration)
@@ -260,21 +265,32 @@ def cmd_pedestrians(args: argparse.Namespace) -> int:
         raise UsageError("no track is fast and long enough; lower --min-speed or --min-duration")
     out = output_dir(Path(args.out or Path("out") / "pedestrians"))
     print(f"{len(tracks)} tracks (mean speed > {args.min_speed:g} m/s, >= "
-          f"{args.min_duration:g} s), controller {args.controller}")
-    rows = evaluate_tracks(tracks, params, args.controller, workers=workers_arg(args))
-    keys = ("scene", "ped_id", "duration_s", "mean_speed_mps", "rmse_rho_m", "rmse_alpha_rad",
-            "min_person_distance_m", "finite")
-    write_csv(out / "pedestrians.csv", keys, ([r[k] for k in keys] for r in rows))
-    rho = np.median([r["rmse_rho_m"] for r in rows])
-    alpha = np.median([r["rmse_alpha_rad"] for r in rows])
-    closest = min(rows, key=lambda r: r["min_person_distance_m"])
-    print(f"median RMSE rho {rho:.4f} m, median RMSE alpha {alpha:.4f} rad")
-    print(f"closest approach {closest['min_person_distance_m']:.3f} m "
-          f"({closest['scene']} pedestrian {closest['ped_id']}); "
-          f"all finite: {all(r['finite'] for r in rows)}")
+          f"{args.min_duration:g} s) x {len(sides)} side(s) x {len(controllers)} "
+          f"controller(s), {args.sensing or 'ideal'} sensing")
+    with progress_bar(len(tracks) * len(sides) * len(controllers), "episode") as progress:
+        rows = walkers.evaluate(tracks, params, controllers, sides, workers_arg(args),
+                                progress)
+    write_csv(out / "pedestrians.csv", walkers.COLUMNS,
+              ([r[k] for k in walkers.COLUMNS] for r in rows))
+    print(walkers_text(walkers.table(rows), walkers.paired(rows, controllers[0])))
     print(f"wrote pedestrians.csv in {out}\n")
     print(pedestrians.CREDIT)
     return 0
+
+
+def walkers_text(table: dict, paired: dict) -> str:
+    """The per-controller table and the paired comparison of ``companion pedestrians``."""
+    lines = [f"{'controller':10s} {'runs':>5s} {'median rho cm':>13s} {'p90 rho cm':>10s} "
+             f"{'median alpha':>12s} {'closest m':>9s}"]
+    for name, r in table.items():
+        lines.append(f"{name:10s} {r['runs']:5d} {r['median_rho_m'] * 100:13.2f} "
+                     f"{r['p90_rho_m'] * 100:10.2f} {r['median_alpha_rad']:12.3f} "
+                     f"{r['min_distance_m']:9.3f}")
+    for name, r in paired.items():
+        lines.append(f"paired with {name}: better rho in {r['better_rho']:.0%} of runs (median "
+                     f"difference {r['median_diff_rho'] * 100:+.2f} cm), better alpha in "
+                     f"{r['better_alpha']:.0%} ({r['median_diff_alpha']:+.3f} rad)")
+    return "\n".join(lines)
 
 
 def cmd_soak(args: argparse.Namespace) -> int:
@@ -302,7 +318,8 @@ def cmd_soak(args: argparse.Namespace) -> int:
 def cmd_reproduce(args: argparse.Namespace) -> int:
     out = output_dir(Path(args.out or Path("out") / "reproduce"))
     names = reproduce.controllers()
-    print(f"Reproducing Fig. 3, Table 2, Fig. 4 and Fig. 7 with {', '.join(names)} into {out}")
+    print(f"Reproducing Fig. 3, Table 2, Fig. 4, Fig. 7 and Table 3 with {', '.join(names)} "
+          f"into {out}")
     with progress_bar(reproduce.episode_count(), "episode") as progress:
         result = reproduce.reproduce(out, workers_arg(args), progress)
     print(reproduce.fig3_summary(result.fig3))
@@ -310,7 +327,11 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     print(reproduce.table2_text(result.table2))
     print("Fig. 4 (figure-8 with the obstacle, every controller):")
     print(reproduce.fig4_text(result.fig4))
-    print(f"wrote table2.csv, table2.md, fig3.csv, fig4.csv and the Fig. 3, 4, 7 PNGs in {out}")
+    print("Table 3 (realistic sensing, mean over seeds; paper's LQR on the real robot at the "
+          "right):")
+    print(table3.text(result.table3))
+    print(f"wrote table2.csv, table2.md, table3.csv, table3.md, fig3.csv, fig4.csv and the "
+          f"Fig. 3, 4, 7 PNGs in {out}")
     return 0
 
 

@@ -1,46 +1,87 @@
-"""The companion beside real walkers: one episode per ETH/UCY track (``companion pedestrians``).
+"""The companion beside real walkers: one episode per ETH/UCY track, side and controller
+(``companion pedestrians``, docs/sensing.md).
 
 Any result on these tracks carries :data:`companion.data.pedestrians.CREDIT`.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from companion.data.pedestrians import Track
 from companion.metrics import compute
-from companion.params import Params
-from companion.sim.recorded import DEFAULT_SMOOTHING, RecordedPerson, gap_faults
+from companion.params import SIDES, Params
+from companion.sim.recorded import DEFAULT_SMOOTHING, RecordedPerson
 from companion.sim.runner import EpisodeSpec, run_many
 from companion.types import Log
 
+#: Per-run columns of ``pedestrians.csv``.
+COLUMNS = ("scene", "ped_id", "side", "controller", "duration_s", "mean_speed_mps",
+           "rmse_rho_m", "rmse_alpha_rad", "min_person_distance_m", "share_stopped", "finite")
 
-def episode(track: Track, params: Params, controller: str = "lqr",
-            smoothing: float = DEFAULT_SMOOTHING) -> EpisodeSpec:
-    """The track's person (:class:`~companion.sim.recorded.RecordedPerson`), the robot starting
-    in its slot, for the track's duration; sample gaps longer than the person timeout are
-    outages."""
+
+def episode(track: Track, params: Params, controller: str = "lqr", side: str = "left",
+            smoothing: float = DEFAULT_SMOOTHING, seed: int = 0) -> EpisodeSpec:
+    """The track's person (:class:`~companion.sim.recorded.RecordedPerson`, not observed in
+    its holes), the robot starting in its slot on ``side``, for the track's duration."""
     person = RecordedPerson(track.t, track.x, track.y, smoothing=smoothing)
-    return EpisodeSpec(controller, person, params, person.duration,
-                       faults=gap_faults(person, params.supervisor.person_timeout))
+    params = params.replace(formation=dataclasses.replace(params.formation,
+                                                          bearing=SIDES[side]))
+    return EpisodeSpec(controller, person, params, person.duration, seed=seed)
 
 
 def summary(log: Log) -> dict:
-    """The metrics of one track's episode that ``companion pedestrians`` reports."""
+    """The metrics of one run that ``companion pedestrians`` reports."""
     m = compute(log)
-    return {"max_person_speed_mps": float(np.max(log["person_v"])),
-            **{k: m[k] for k in ("rmse_rho_m", "rmse_alpha_rad", "min_person_distance_m",
-                                 "finite")}}
+    return {k: m[k] for k in ("rmse_rho_m", "rmse_alpha_rad", "min_person_distance_m",
+                              "share_stopped", "finite")}
 
 
-def evaluate_tracks(tracks: Sequence[Track], params: Params, controller: str = "lqr",
-                    smoothing: float = DEFAULT_SMOOTHING, workers: int | None = None,
-                    progress: Callable[[int], None] | None = None) -> list[dict]:
-    """One row per track: ``scene``, ``ped_id``, ``duration_s``, ``mean_speed_mps`` (raw
-    track) and :func:`summary` of its episode."""
-    specs = [episode(track, params, controller, smoothing) for track in tracks]
-    rows = run_many(specs, workers, summarize=summary, progress=progress)
-    return [{"scene": t.scene, "ped_id": t.ped_id, "duration_s": t.duration,
-             "mean_speed_mps": t.mean_speed, **row} for t, row in zip(tracks, rows)]
+def evaluate(tracks: Sequence[Track], params: Params, controllers: Sequence[str] = ("lqr",),
+             sides: Sequence[str] = ("left", "right"), workers: int | None = None,
+             progress: Callable[[int], None] | None = None) -> list[dict]:
+    """One row (:data:`COLUMNS`) per track, side and controller; every controller runs the
+    same episodes (seed = the track's index), so rows can be compared in pairs."""
+    jobs = [(i, t, s, c) for i, t in enumerate(tracks) for s in sides for c in controllers]
+    specs = [episode(t, params, c, s, seed=i) for i, t, s, c in jobs]
+    results = run_many(specs, workers, summarize=summary, progress=progress)
+    return [{"scene": t.scene, "ped_id": t.ped_id, "side": s, "controller": c,
+             "duration_s": t.duration, "mean_speed_mps": t.mean_speed, **r}
+            for (_, t, s, c), r in zip(jobs, results)]
+
+
+def table(rows: Sequence[dict]) -> dict[str, dict]:
+    """Per controller: runs, median and 90th percentile of RMSE rho, median RMSE alpha, the
+    closest approach to the true person and the share of runs that ever stopped."""
+    out = {}
+    for name in dict.fromkeys(r["controller"] for r in rows):
+        mine = [r for r in rows if r["controller"] == name]
+        rho = np.array([r["rmse_rho_m"] for r in mine])
+        out[name] = {"runs": len(mine), "median_rho_m": float(np.median(rho)),
+                     "p90_rho_m": float(np.percentile(rho, 90)),
+                     "median_alpha_rad": float(np.median([r["rmse_alpha_rad"] for r in mine])),
+                     "min_distance_m": float(min(r["min_person_distance_m"] for r in mine)),
+                     "all_finite": all(r["finite"] for r in mine)}
+    return out
+
+
+def paired(rows: Sequence[dict], reference: str = "lqr") -> dict[str, dict]:
+    """``reference`` against every other controller on the same runs: the share of runs in
+    which it has the lower RMSE rho (alpha), and the median of its RMSE minus the other's."""
+    key = {(r["scene"], r["ped_id"], r["side"], r["controller"]): r for r in rows}
+    out = {}
+    for name in dict.fromkeys(r["controller"] for r in rows):
+        if name == reference:
+            continue
+        pairs = [(key[(s, p, d, reference)], r) for (s, p, d, c), r in key.items()
+                 if c == name and (s, p, d, reference) in key]
+        entry = {"runs": len(pairs)}
+        for metric, short in (("rmse_rho_m", "rho"), ("rmse_alpha_rad", "alpha")):
+            diff = np.array([a[metric] - b[metric] for a, b in pairs])
+            entry[f"better_{short}"] = float(np.mean(diff < 0.0)) if len(diff) else np.nan
+            entry[f"median_diff_{short}"] = float(np.median(diff)) if len(diff) else np.nan
+        out[name] = entry
+    return out

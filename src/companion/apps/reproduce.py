@@ -1,4 +1,5 @@
-"""``companion reproduce``: the paper's Fig. 3, Table 2, Fig. 4 and Fig. 7, side by side.
+"""``companion reproduce``: the paper's Fig. 3, Table 2, Fig. 4, Fig. 7 and Table 3 (with
+realistic sensing, :mod:`companion.apps.table3`), side by side.
 
 Every number comes from a simulation run here; the paper's published Table 2 is kept beside
 ours for comparison (:data:`PAPER_TABLE2`, in the paper's units).
@@ -12,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from companion import metrics
-from companion.apps import plots
+from companion.apps import plots, table3
 from companion.control import CONTROLLERS
 from companion.io import save_figure, write_csv, write_text
 from companion.params import Params
@@ -112,18 +113,20 @@ class Reproduction:
     table2: list[Table2Row]
     fig3: list[tuple]
     fig4: list[list]
+    table3: list[list]
 
 
 def episode_count() -> int:
-    """Episodes :func:`reproduce` runs: Fig. 3, Table 2, Fig. 4 and Fig. 7."""
+    """Episodes :func:`reproduce` runs: Fig. 3, Table 2, Fig. 4, Fig. 7 and Table 3."""
     names = controllers()
-    return len(list(convergence.cases())) + len(TRAJECTORIES) * len(names) + len(names) + 1
+    return (len(list(convergence.cases())) + len(TRAJECTORIES) * len(names) + len(names) + 1
+            + len(table3.jobs(names)))
 
 
 def reproduce(out: Path, workers: int | None = None, progress: Progress | None = None
               ) -> Reproduction:
-    """Run Fig. 3, Table 2, Fig. 4 and Fig. 7 (every episode through the runner, in
-    ``workers`` processes) and write their files into ``out``."""
+    """Run Fig. 3, Table 2, Fig. 4, Fig. 7 and Table 3 (every episode through the runner,
+    in ``workers`` processes) and write their files into ``out``."""
     names = controllers()
     cases = list(convergence.cases())
     table2_jobs = [(traj, ctl) for traj in TRAJECTORIES for ctl in names]
@@ -131,6 +134,8 @@ def reproduce(out: Path, workers: int | None = None, progress: Progress | None =
     specs = [convergence.episode(case, "lqr", Params()) for case in cases]
     specs += [load_scenario(TRAJECTORIES[traj]).episode(ctl) for traj, ctl in table2_jobs]
     specs += [fig4.episode(ctl) for ctl in names] + [fig7.episode("lqr")]
+    table3_jobs = table3.jobs(names)
+    specs += [spec for _, _, spec in table3_jobs]
     logs = iter(run_many(specs, workers, progress=progress))
     fig3_runs: dict[float, list] = {}
     fig3_rows = []
@@ -141,6 +146,7 @@ def reproduce(out: Path, workers: int | None = None, progress: Progress | None =
             in zip(table2_jobs, logs)]
     fig4_runs = {ctl: log for ctl, log in zip(names, logs)}
     fig7_log = next(logs)
+    table3_rows = table3.rows(table3_jobs, list(logs))
     write_csv(out / "fig3.csv", convergence.CSV_COLUMNS, fig3_rows)
     for speed, runs in fig3_runs.items():
         _save(plots.convergence(runs, f"Fig. 3: person at {speed:g} m/s (lqr)"),
@@ -152,7 +158,9 @@ def reproduce(out: Path, workers: int | None = None, progress: Progress | None =
     write_csv(out / "fig4.csv", FIG4_COLUMNS, fig4)
     _scenario_figures(out, "fig4", fig4_runs)
     _scenario_figures(out, "fig7", {"lqr": fig7_log})
-    return Reproduction(rows, fig3_rows, fig4)
+    write_csv(out / "table3.csv", table3.COLUMNS, table3_rows)
+    write_text(out / "table3.md", table3.markdown(table3_rows))
+    return Reproduction(rows, fig3_rows, fig4, table3_rows)
 
 
 FIG4_COLUMNS = ("controller", "obstacle_collisions", "min_obstacle_clearance_m",

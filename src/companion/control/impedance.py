@@ -1,18 +1,17 @@
 """Impedance control (IC) baseline (after Tian et al. [17]).
 
 The slot error in the person's frame obeys ``M e_ddot + D e_dot + K e = 0`` per axis
-(longitudinal, lateral); the error velocity comes from the command actually sent
-(:meth:`applied`, no wind-up), the slot velocity is fed forward. docs/baselines.md gives the
-law and its tuning.
+(longitudinal, lateral); the error velocity comes from the robot's actual velocity
+(odometry, else the command actually sent: no wind-up), the slot velocity is fed forward.
+docs/baselines.md gives the law and its tuning.
 """
 
 from __future__ import annotations
 
 from companion.control.base import saturate
 from companion.control.slot import (
-    LastCommand,
+    ActualVelocity,
     from_frame,
-    last_velocity,
     reference_point,
     slot_point,
     slot_velocity,
@@ -23,7 +22,7 @@ from companion.params import Params
 from companion.types import Command, Observation
 
 
-class ImpedanceController(LastCommand):
+class ImpedanceController(ActualVelocity):
     """Per-axis impedance on the slot error in the person frame; see the module docstring."""
 
     def __init__(self, params: Params):
@@ -37,7 +36,7 @@ class ImpedanceController(LastCommand):
         rx, ry = reference_point(r, d)
         sx, sy = slot_point(h, p)
         sdx, sdy = slot_velocity(h, p)
-        rdx, rdy = last_velocity(r.theta, self._last, d, (sdx, sdy))
+        rdx, rdy = self.point_velocity(obs, d, (sdx, sdy))
         e = to_frame(h.theta, rx - sx, ry - sy)
         ed_world = to_frame(h.theta, rdx - sdx, rdy - sdy)
         e_dot = (ed_world[0] + w * e[1], ed_world[1] - w * e[0])

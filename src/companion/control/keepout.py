@@ -7,13 +7,18 @@ The safety supervisor applies them to the controller's target in this order (doc
    ``keepout.person_clearance`` (robot centre to person) and ``keepout.obstacle_clearance``
    (footprint to surface). 0 switches a barrier off.
 2. **Evasive check** (:func:`evasive_target`): when the robot and the person close in, the next
-   1.2 s are predicted and a command that would come within 5 cm of the protective distance
-   or of an obstacle is replaced by the closest safe one of a grid.
+   1.2 s are predicted (the robot through its actuator lag, the person along its estimated
+   heading and ``keepout.heading_sigmas`` standard deviations to either side) and a command
+   that would come within 5 cm of the protective distance or of an obstacle is replaced by
+   the closest safe one of a grid.
 3. **Braking bound** (:func:`braking_bound`): inside ``protective_distance`` the robot may only
    turn or move away; outside it, and towards obstacles, the approach speed is what braking at
    the rate limit can still stop in time, counting one period of delay.
 
-Every rule changes only ``v`` except the evasive check, so the robot can always turn.
+Every rule changes only ``v`` except the evasive check, so the robot can always turn. The
+protective distance grows by ``keepout.uncertainty_sigmas`` standard deviations of where the
+person may be by the time the robot reacts (:func:`reaction_std`), and braking counts the
+actuator lag and the detections' latency as reaction time.
 """
 
 from __future__ import annotations
@@ -34,7 +39,7 @@ from companion.geometry import (
     unicycle_step,
 )
 from companion.params import Params
-from companion.types import Circle, Obstacle, PersonState, Pose
+from companion.types import Circle, Obstacle, PersonEstimate, PersonState, Pose
 
 #: Speed (m/s) up to which a person may speed up (brisk walking), in the evasive prediction.
 BRISK_WALK = 1.5
@@ -93,9 +98,29 @@ def clip_to(v: float, bounds: Iterable[tuple[float, float]], v_max: float) -> fl
     return min(max(v, -v_max), v_max)
 
 
+def reaction_std(estimate: PersonEstimate, delay: float) -> float:
+    """Standard deviation (m, larger axis) of the person's position ``delay`` s on from the
+    estimate: its position and velocity uncertainty over the time the robot needs to react."""
+    c = estimate.covariance
+    pos = c[:2, :2] + delay * (c[:2, 2:4] + c[2:4, :2]) + delay * delay * c[2:4, 2:4]
+    return math.sqrt(max(float(np.linalg.eigvalsh(pos)[-1]), estimate.position_std ** 2, 0.0))
+
+
+def heading_std(estimate: PersonEstimate) -> float:
+    """Standard deviation (rad) of the person's heading: the velocity's uncertainty across
+    its direction over the speed, at most pi/4 (a standing person has no heading)."""
+    if estimate.state.v <= 0.0:
+        return 0.0
+    th = estimate.state.theta
+    across = np.array((-math.sin(th), math.cos(th)))
+    var = float(across @ estimate.covariance[2:4, 2:4] @ across)
+    return min(math.sqrt(max(var, 0.0)) / estimate.state.v, 0.25 * math.pi)
+
+
 def barrier_speed(v: float, robot: Pose, person: PersonState, obstacles: Sequence[Obstacle],
-                  params: Params) -> float:
-    """Rule 1: the speed closest to ``v`` that meets the comfort barriers."""
+                  params: Params, grow: float = 0.0) -> float:
+    """Rule 1: the speed closest to ``v`` that meets the comfort barriers (the person's
+    clearance grown by ``grow`` m)."""
     k = params.keepout
     bounds = []
     if k.person_clearance > 0.0:
@@ -104,7 +129,7 @@ def barrier_speed(v: float, robot: Pose, person: PersonState, obstacles: Sequenc
             return 0.0  # no direction to move away along
         nx, ny, dist, approach = normal
         bounds.append(speed_bound(robot.theta, nx, ny, approach,
-                                  k.barrier_rate * (dist - k.person_clearance)))
+                                  k.barrier_rate * (dist - k.person_clearance - grow)))
     if k.obstacle_clearance > 0.0:
         for nx, ny, gap in obstacle_normals(robot, obstacles, params.robot.radius):
             bounds.append(speed_bound(robot.theta, nx, ny, 0.0,
@@ -122,11 +147,19 @@ def braking_speed(gap: float, decel: float, dt: float) -> float:
     return math.sqrt(ad * ad + 2.0 * decel * gap) - ad
 
 
+def reaction_delay(params: Params) -> float:
+    """Time (s) from the data a command is based on to the robot braking: one period, the
+    actuator lag and the person detections' latency."""
+    return params.dt + params.sensing.actuator_tau_s + params.sensing.person_latency_s
+
+
 def braking_bound(v: float, robot: Pose, person: PersonState, obstacles: Sequence[Obstacle],
-                  params: Params, reasons: list[str]) -> float:
-    """Rule 3: ``v`` limited by the protective zone and the braking-distance bounds."""
+                  params: Params, reasons: list[str], grow: float = 0.0) -> float:
+    """Rule 3: ``v`` limited by the protective zone (grown by ``grow`` m) and the
+    braking-distance bounds, reacting :func:`reaction_delay` late."""
     k, s = params.keepout, params.supervisor
     rate = min(s.accel_max, s.decel_max)
+    delay = reaction_delay(params)
     bounds = []
     normal = person_normal(robot, person)
     if normal is None:
@@ -134,28 +167,30 @@ def braking_bound(v: float, robot: Pose, person: PersonState, obstacles: Sequenc
         bounds.append((0.0, 0.0))
     else:
         nx, ny, dist, approach = normal
-        gap = dist - k.protective_distance
+        gap = dist - k.protective_distance - grow
         if gap <= 0.0:
             reasons.append("protective_zone")
             bounds.append(speed_bound(robot.theta, nx, ny, max(approach, 0.0), 0.0))
         else:
             net = max(rate - k.person_accel, 0.1 * rate)   # the person may speed up
             bounds.append(speed_bound(robot.theta, nx, ny, max(approach, 0.0),
-                                      braking_speed(gap, net, params.dt)))
+                                      braking_speed(gap, net, delay)))
     for nx, ny, gap in obstacle_normals(robot, obstacles, params.robot.radius):
         bounds.append(speed_bound(robot.theta, nx, ny, 0.0,
-                                  braking_speed(gap - k.contact_margin, rate, params.dt)))
+                                  braking_speed(gap - k.contact_margin, rate, delay)))
     return clip_to(v, bounds, params.robot.v_max)
 
 
-def closing(robot: Pose, person: PersonState, v_now: float, params: Params) -> bool:
+def closing(robot: Pose, person: PersonState, v_now: float, params: Params,
+            grow: float = 0.0) -> bool:
     """True if robot and person get closer at the current velocities, or are within
-    :data:`EVASIVE_BAND` of the protective distance: then the evasive check runs."""
+    :data:`EVASIVE_BAND` of the protective distance (grown by ``grow``): then the evasive
+    check runs."""
     normal = person_normal(robot, person)
     if normal is None:
         return True
     nx, ny, dist, approach = normal
-    if dist < params.keepout.protective_distance + EVASIVE_BAND:
+    if dist < params.keepout.protective_distance + grow + EVASIVE_BAND:
         return True
     away = v_now * (math.cos(robot.theta) * nx + math.sin(robot.theta) * ny)
     return approach - away > 0.0
@@ -174,7 +209,8 @@ def speed_up_distance(v: float, accel: float, t: float) -> float:
 class Rollout(NamedTuple):
     """What :func:`rollout_margins` predicts with: the person (pose, speed, turn rate, and the
     acceleration it may add), the protective distance, the footprint radius, the robot's rate
-    limits (m/s^2, rad/s^2) and the prediction grid (step s, number of steps)."""
+    limits (m/s^2, rad/s^2), the prediction grid (step s, number of steps), the actuator lag
+    (s) and the spread (rad) of the person's heading hypotheses."""
 
     px: float
     py: float
@@ -188,6 +224,8 @@ class Rollout(NamedTuple):
     w_rate: float
     step: float
     n_steps: int
+    lag: float = 0.0
+    spread: float = 0.0
 
 
 @jitable
@@ -195,31 +233,41 @@ def rollout_margins(x0: float, y0: float, th0: float, v0: float, w0: float,
                     targets: np.ndarray, spec: Rollout, obstacles: ObstacleArrays) -> np.ndarray:
     """Predicted safety margin of each candidate ``(v, omega)`` (rows of ``targets``).
 
-    The robot's velocity ramps from ``(v0, w0)`` to the target at the rate limits; the person
-    keeps its speed and turn rate and may also gain the :func:`speed_up_distance` along its
-    heading. The margin is the smallest, over the horizon, of the distance to the person minus
-    the protective distance and the obstacle clearance (:func:`min_clearance`).
+    The robot's command ramps from ``(v0, w0)`` to the target at the rate limits and its
+    velocity follows through the first-order ``lag``; the person keeps its speed and turn rate
+    from its heading and, with a ``spread``, from the headings ``spread`` to either side, and
+    may also gain the :func:`speed_up_distance` along its heading. The margin is the smallest,
+    over the horizon and the headings, of the distance to the person minus the protective
+    distance and the obstacle clearance (:func:`min_clearance`).
     """
     n = spec.n_steps
-    hx = np.empty(n)
-    hy = np.empty(n)
-    for k in range(n):
-        t = (k + 1) * spec.step
-        qx, qy, _ = unicycle_step(spec.px, spec.py, spec.ptheta, spec.pv, spec.pomega, t)
-        extra = speed_up_distance(spec.pv, spec.person_accel, t)
-        hx[k] = qx + extra * math.cos(spec.ptheta)
-        hy[k] = qy + extra * math.sin(spec.ptheta)
+    m = 3 if spec.spread > 0.0 else 1
+    hx = np.empty((m, n))
+    hy = np.empty((m, n))
+    for j in range(m):
+        heading = spec.ptheta + (j - (m - 1) // 2) * spec.spread
+        for k in range(n):
+            t = (k + 1) * spec.step
+            qx, qy, _ = unicycle_step(spec.px, spec.py, heading, spec.pv, spec.pomega, t)
+            extra = speed_up_distance(spec.pv, spec.person_accel, t)
+            hx[j, k] = qx + extra * math.cos(heading)
+            hy[j, k] = qy + extra * math.sin(heading)
+    follow = 1.0 - math.exp(-spec.step / spec.lag) if spec.lag > 0.0 else 1.0
     out = np.empty(targets.shape[0])
     for i in range(targets.shape[0]):
         x, y, th = x0, y0, th0
+        va, wa = v0, w0
         margin = math.inf
         for k in range(n):
             t = (k + 1) * spec.step
             v = v0 + min(max(targets[i, 0] - v0, -spec.v_rate * t), spec.v_rate * t)
             w = w0 + min(max(targets[i, 1] - w0, -spec.w_rate * t), spec.w_rate * t)
-            x, y, th = unicycle_step(x, y, th, v, w, spec.step)
-            margin = min(margin, math.hypot(x - hx[k], y - hy[k]) - spec.protective,
-                         min_clearance(x, y, obstacles, spec.radius))
+            va += follow * (v - va)
+            wa += follow * (w - wa)
+            x, y, th = unicycle_step(x, y, th, va, wa, spec.step)
+            margin = min(margin, min_clearance(x, y, obstacles, spec.radius))
+            for j in range(m):
+                margin = min(margin, math.hypot(x - hx[j, k], y - hy[j, k]) - spec.protective)
         out[i] = margin
     return out
 
@@ -229,10 +277,13 @@ _rollout_margins = kernel(rollout_margins)
 
 def evasive_target(robot: Pose, current: tuple[float, float], nominal: tuple[float, float],
                    person: PersonState, obstacles: Sequence[Obstacle], params: Params,
-                   needed: float = 0.05, comfort: float = 0.2, horizon: float = 1.2,
-                   step: float = 0.1) -> tuple[float, float] | None:
-    """Rule 2: a replacement for the ``nominal`` target if its predicted margin is below
-    ``needed`` m, else None.
+                   grow: float = 0.0, spread: float = 0.0, needed: float = 0.05,
+                   comfort: float = 0.2, horizon: float = 1.2, step: float = 0.1
+                   ) -> tuple[float, float] | None:
+    """Rule 2: a replacement for the ``nominal`` target if its predicted margin (to the
+    protective distance grown by ``grow`` m, for the person's headings ``spread`` rad to
+    either side, and to the obstacles; the robot with its actuator lag) is below ``needed``
+    m, else None.
 
     The replacement is the grid target with the best ``min(margin, comfort) - 0.02 * change``:
     margins count up to ``comfort`` m, and among equally safe targets the one closest to the
@@ -241,8 +292,9 @@ def evasive_target(robot: Pose, current: tuple[float, float], nominal: tuple[flo
     r, s, k = params.robot, params.supervisor, params.keepout
     targets = np.vstack([nominal, _GRID * (r.v_max, r.omega_max)])
     spec = Rollout(person.x, person.y, person.theta, person.v, person.omega, k.person_accel,
-                   k.protective_distance, r.radius, min(s.accel_max, s.decel_max),
-                   s.angular_accel_max, step, int(round(horizon / step)))
+                   k.protective_distance + grow, r.radius, min(s.accel_max, s.decel_max),
+                   s.angular_accel_max, step, int(round(horizon / step)),
+                   params.sensing.actuator_tau_s, spread)
     margin = _rollout_margins(robot.x, robot.y, robot.theta, float(current[0]),
                               float(current[1]), targets, spec, obstacle_arrays(obstacles))
     if margin[0] >= needed:
@@ -253,16 +305,20 @@ def evasive_target(robot: Pose, current: tuple[float, float], nominal: tuple[flo
     return float(targets[best, 0]), float(targets[best, 1])
 
 
-def keep_out(target: tuple[float, float, float], robot: Pose, person: PersonState,
+def keep_out(target: tuple[float, float, float], robot: Pose, estimate: PersonEstimate,
              obstacles: Sequence[Obstacle], v_now: tuple[float, float], params: Params,
              reasons: list[str]) -> tuple[float, float, float]:
-    """The target ``(v, omega, u_ob)`` after rules 1-3 (module docstring); ``v_now`` is the
-    command in force. Appends "evasive" or "protective_zone" to ``reasons`` when they act."""
+    """The target ``(v, omega, u_ob)`` after rules 1-3 (module docstring) for the person
+    ``estimate``; ``v_now`` is the robot's velocity now. Appends "evasive" or
+    "protective_zone" to ``reasons`` when they act."""
     v, w, u_ob = target
+    person = estimate.state
+    grow = params.keepout.uncertainty_sigmas * reaction_std(estimate, reaction_delay(params))
     v = barrier_speed(v, robot, person, obstacles, params)
-    if closing(robot, person, v_now[0], params):
-        evade = evasive_target(robot, v_now, (v, w), person, obstacles, params)
+    if closing(robot, person, v_now[0], params, grow):
+        spread = params.keepout.heading_sigmas * heading_std(estimate)
+        evade = evasive_target(robot, v_now, (v, w), person, obstacles, params, grow, spread)
         if evade is not None:
             (v, w), u_ob = evade, 0.0
             reasons.append("evasive")
-    return braking_bound(v, robot, person, obstacles, params, reasons), w, u_ob
+    return braking_bound(v, robot, person, obstacles, params, reasons, grow), w, u_ob

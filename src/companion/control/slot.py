@@ -12,7 +12,7 @@ import math
 
 from companion.geometry import offset_point
 from companion.params import Params
-from companion.types import Command, PersonState, Pose
+from companion.types import Command, Observation, PersonState, Pose
 
 
 def reference_point(robot: Pose, d: float) -> tuple[float, float]:
@@ -60,23 +60,27 @@ def from_frame(angle: float, x: float, y: float) -> tuple[float, float]:
     return c * x - s * y, s * x + c * y
 
 
-def last_velocity(theta: float, last: tuple[float, float] | None, d: float,
-                  fallback: tuple[float, float]) -> tuple[float, float]:
-    """Velocity of R under the last command actually sent (``last`` = (v, omega)) at heading
-    ``theta``; ``fallback`` (the slot velocity: a bumpless start) before any command."""
-    if last is None:
-        return fallback
-    return point_velocity(theta, last[0], last[1], d)
-
-
-class LastCommand:
-    """Base for controllers that remember the last command actually sent (VSM, IC): it gives
-    the velocity of R on the next step (:func:`last_velocity`), so saturation and the outer
-    layers cannot wind up their virtual state."""
+class ActualVelocity:
+    """Base for controllers whose virtual state starts from the robot's actual velocity (VSM,
+    IC): odometry (``obs.robot_velocity``) when the observation has it, else the last command
+    actually sent (:meth:`applied`). So saturation, the outer layers and the base's lag cannot
+    wind the virtual state up, and no command is taken for the robot's actual motion."""
 
     def reset(self) -> None:
         self._last: tuple[float, float] | None = None   # last applied (v, omega)
 
     def applied(self, cmd: Command) -> None:
-        """Store the command actually sent: it gives R_dot on the next step."""
+        """Store the command actually sent (R_dot on the next step without odometry; a
+        controller also stores its own output, for callers that never call this)."""
         self._last = (cmd.v, cmd.omega)
+
+    def point_velocity(self, obs: Observation, d: float, fallback: tuple[float, float]
+                       ) -> tuple[float, float]:
+        """R_dot now; ``fallback`` (the slot velocity: a bumpless start) while neither
+        odometry nor a command sent is known."""
+        v = obs.robot_velocity
+        if v is None or not (math.isfinite(v[0]) and math.isfinite(v[1])):
+            v = self._last
+        if v is None:
+            return fallback
+        return point_velocity(obs.robot.theta, v[0], v[1], d)

@@ -3,27 +3,35 @@
 It is the only layer that accepts raw sensor data and the outermost one of the standard stack.
 Its output is finite, within the velocity limits and within the acceleration limits (one
 period ``dt`` per call), whatever the input, and carries a status (``ok``, ``degraded``: a
-fault is handled and the robot moves, ``stopped``: it brakes to a stop and holds) and a
-reason. Per call:
+fault is handled and the robot moves, ``stopped``: it brakes to a stop and holds), a reason
+and the person estimate. Per call:
 
 1. clock (:class:`~companion.control.checks.Clock`);
-2. person estimate (:class:`~companion.control.person_gate.PersonGate`);
+2. the person: detections to the tracker (:class:`~companion.tracking.PersonTracker`), the
+   one place that decides whether the person is seen, predicted or lost;
 3. robot pose, obstacles and scan (:mod:`companion.control.checks`);
-4. the wrapped controller, on a checked observation;
-5. keep-out rules (:func:`companion.control.keepout.keep_out`);
+4. the wrapped controller, on a checked observation predicted to the moment its command takes
+   effect (``sensing.actuator_tau_s`` on), the same for every controller;
+5. keep-out rules, with the person's distances grown by its position uncertainty
+   (:func:`companion.control.keepout.keep_out`);
 6. rate and velocity limits (:func:`companion.control.limits.limit`); a stopped robot's target
    is zero, so it brakes at the limits.
 """
 
 from __future__ import annotations
 
+import math
+from collections import deque
+
 from companion.control import checks
 from companion.control.base import Controller
 from companion.control.keepout import keep_out
 from companion.control.limits import limit
-from companion.control.person_gate import PersonGate
+from companion.control.slot import reference_point, slot_point
+from companion.geometry import unicycle_step, wrap_pi
 from companion.params import Params
-from companion.types import Command, Observation
+from companion.tracking import PersonTracker, exact_detection, predict
+from companion.types import Command, Observation, PersonDetection, PersonEstimate, Pose
 
 OK, DEGRADED, STOPPED = "ok", "degraded", "stopped"
 
@@ -31,11 +39,14 @@ OK, DEGRADED, STOPPED = "ok", "degraded", "stopped"
 class SafetySupervisor:
     """Wraps any controller; see the module docstring."""
 
+    #: The simulator hands this layer the raw person detections (it tracks the person).
+    takes_detections = True
+
     def __init__(self, inner: Controller, params: Params):
         self.inner = inner
         self.params = params
         self._clock = checks.Clock(params.dt, params.supervisor.max_step_ratio)
-        self._person = PersonGate(params.supervisor)
+        self._tracker = PersonTracker(params.tracker)
         self.reset()
 
     def reset(self) -> None:
@@ -43,26 +54,32 @@ class SafetySupervisor:
         self._inner_fresh = False     # inner must be reset before its next step
         self._prev = (0.0, 0.0)       # last output (v, omega)
         self._clock.reset()
-        self._person.reset()
+        self._tracker.reset()
+        self._sensor_t = 0.0          # the sensor clock: the last valid time, periods counted on
+        self._poses: deque[tuple[float, Pose]] = deque()   # for robot-frame detections
+        self._far_since: float | None = None               # the slot error is large since
 
     def step(self, obs: Observation) -> Command:
         p = self.params
         reasons: list[str] = []
         stop = ""
-        elapsed, clock = self._clock.tick(obs.t)
+        _, clock = self._clock.tick(obs.t)
         if clock != "ok":
             reasons.append(clock)
             self._inner_fresh = True
         fresh = clock != "clock"   # a zero, negative or non-finite step discards the data
-        self._person.advance(elapsed)
         if fresh:
-            self._person.update(obs.person, reasons)
-            self._inner_fresh |= self._person.reacquired
-        person = self._person.now(reasons)
+            self._sensor_t = obs.t
+            self._remember(obs.t, obs.robot)
+            self._tracker.add(self._detections(obs), obs.t, self._pose_at, reasons)
+            self._inner_fresh |= self._tracker.reacquired
+        else:
+            self._sensor_t += p.dt
+        estimate = self._tracker.estimate(self._sensor_t, reasons)
         if not checks.pose_is_finite(obs.robot):
             stop = "robot_pose_invalid"
-        elif person is None:
-            stop = "reacquiring" if self._person.reacquiring else "person_lost"
+        elif estimate is None:
+            stop = "reacquiring" if self._tracker.reacquiring else "person_lost"
         obstacles = tuple(ob for ob in obs.obstacles if checks.obstacle_is_finite(ob))
         if len(obstacles) < len(obs.obstacles):
             reasons.append("obstacle_invalid")
@@ -70,6 +87,7 @@ class SafetySupervisor:
             stop = "obstacle_in_footprint"
         if not stop and obs.scan is not None:
             stop = checks.scan_fault(obs.scan, p, reasons)
+        velocity = self._velocity(obs)
 
         stepped = False
         target = (*self._prev, 0.0)
@@ -77,8 +95,7 @@ class SafetySupervisor:
             if self._inner_fresh:
                 self.inner.reset()
                 self._inner_fresh = False
-            cmd = self.inner.step(Observation(self._clock.now, obs.robot, person, obstacles,
-                                              obs.scan))
+            cmd = self.inner.step(self._ahead(obs, estimate, obstacles, velocity))
             if checks.finite(cmd.v, cmd.omega, cmd.u_ob):
                 stepped, target = True, (cmd.v, cmd.omega, cmd.u_ob)
             else:
@@ -86,15 +103,17 @@ class SafetySupervisor:
         if stop:
             target = (0.0, 0.0, 0.0)
             self._inner_fresh = True
+            self._far_since = None    # a stop restarts the slot-error clock
         else:
-            target = keep_out(target, obs.robot, person, obstacles, self._prev, p, reasons)
+            self._check_slot(obs.robot, estimate, reasons)
+            target = keep_out(target, obs.robot, estimate, obstacles, velocity, p, reasons)
         self._prev = limit(target[:2], self._prev, p)
         final = Command(*self._prev, target[2])
         if stepped:
             self.inner.applied(final)
         status = STOPPED if stop else DEGRADED if reasons else OK
         reason = "+".join(dict.fromkeys([stop] * bool(stop) + reasons))
-        return Command(final.v, final.omega, final.u_ob, status, reason)
+        return Command(final.v, final.omega, final.u_ob, status, reason, estimate)
 
     def applied(self, cmd: Command) -> None:
         """Told the command the robot executes outside a step (its velocity at the start of an
@@ -104,3 +123,56 @@ class SafetySupervisor:
             self._prev = (min(max(cmd.v, -r.v_max), r.v_max),
                           min(max(cmd.omega, -r.omega_max), r.omega_max))
             self.inner.applied(cmd)
+
+    # -- the pieces -----------------------------------------------------------------------
+
+    def _detections(self, obs: Observation) -> tuple[PersonDetection, ...]:
+        """The observation's detections; a ``person`` given is an exact detection now."""
+        if obs.person is None:
+            return obs.detections
+        return (*obs.detections,
+                exact_detection(obs.t, obs.person, self.params.tracker.world_frame))
+
+    def _remember(self, t: float, robot: Pose) -> None:
+        if checks.pose_is_finite(robot):
+            self._poses.append((t, robot))
+        while self._poses and self._poses[0][0] < t - self.params.tracker.max_delay_s - 1.0:
+            self._poses.popleft()
+
+    def _pose_at(self, t: float) -> Pose:
+        """The robot pose at time ``t``: the last one known at or before it."""
+        at = self._poses[0][1] if self._poses else Pose(math.nan, math.nan, math.nan)
+        for time, pose in self._poses:
+            if time > t:
+                break
+            at = pose
+        return at
+
+    def _velocity(self, obs: Observation) -> tuple[float, float]:
+        """The robot's velocity: odometry if it is given and finite, else the last command."""
+        v = obs.robot_velocity
+        return v if v is not None and checks.finite(*v) else self._prev
+
+    def _ahead(self, obs: Observation, estimate: PersonEstimate,
+               obstacles: tuple, velocity: tuple[float, float]) -> Observation:
+        """What the controller gets: robot and person predicted ``actuator_tau_s`` on, the
+        moment a command sent now mostly takes effect."""
+        tau = self.params.sensing.actuator_tau_s
+        robot, person = obs.robot, estimate.walker
+        if tau > 0.0:
+            x, y, th = unicycle_step(robot.x, robot.y, robot.theta, *velocity, tau)
+            robot, person = Pose(x, y, wrap_pi(th)), predict(person, tau)
+        return Observation(self._clock.now, robot, person, obstacles, obs.scan, velocity)
+
+    def _check_slot(self, robot: Pose, estimate: PersonEstimate, reasons: list[str]) -> None:
+        """Report a slot error above ``slot_error_m`` that lasts ``slot_error_time_s``."""
+        s = self.params.supervisor
+        rx, ry = reference_point(robot, self.params.robot.d)
+        sx, sy = slot_point(estimate.walker, self.params)
+        if math.hypot(rx - sx, ry - sy) <= s.slot_error_m:
+            self._far_since = None
+            return
+        if self._far_since is None:
+            self._far_since = self._sensor_t
+        if self._sensor_t - self._far_since >= s.slot_error_time_s:
+            reasons.append("slot_error")

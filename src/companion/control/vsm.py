@@ -2,16 +2,15 @@
 
 A spring-damper between R and the slot S pulls a virtual mass at R; one explicit Euler step
 gives the velocity of R, mapped to ``(v, omega)`` by the offset-point kinematics. The mass
-starts from the velocity of the command actually sent (:meth:`applied`), so saturation cannot
-wind it up. docs/baselines.md gives the law and its tuning.
+starts from the robot's actual velocity (odometry, else the command actually sent), so
+saturation and the base's lag cannot wind it up. docs/baselines.md gives the law and its tuning.
 """
 
 from __future__ import annotations
 
 from companion.control.base import saturate
 from companion.control.slot import (
-    LastCommand,
-    last_velocity,
+    ActualVelocity,
     reference_point,
     slot_point,
     slot_velocity,
@@ -21,7 +20,7 @@ from companion.params import Params
 from companion.types import Command, Observation
 
 
-class VsmController(LastCommand):
+class VsmController(ActualVelocity):
     """Spring-damper-mass between R and the slot; see the module docstring."""
 
     def __init__(self, params: Params):
@@ -35,7 +34,7 @@ class VsmController(LastCommand):
         rx, ry = reference_point(r, d)
         sx, sy = slot_point(h, p)
         sdx, sdy = slot_velocity(h, p)
-        rdx, rdy = last_velocity(r.theta, self._last, d, (sdx, sdy))
+        rdx, rdy = self.point_velocity(obs, d, (sdx, sdy))
         fx = g.stiffness * (sx - rx) - g.damping * (rdx - sdx)
         fy = g.stiffness * (sy - ry) - g.damping * (rdy - sdy)
         vx, vy = rdx + p.dt * fx / g.mass, rdy + p.dt * fy / g.mass

@@ -1,17 +1,19 @@
-"""Closed-loop episode: person motion, controller and exactly integrated unicycle plant.
+"""Closed-loop episode: person motion, sensing, controller and a unicycle plant with lag.
 
-At each sample ``k`` (time ``t_k = k * dt``) the runner reads the person's true state, the
-controller observes it (optionally with Gaussian sensor noise) together with the robot pose,
-and the command is held for one period while the unicycle is integrated exactly
-(:func:`companion.geometry.unicycle_step`). Row ``k`` of the log holds the state at ``t_k``
-and the command applied from ``t_k`` on. The run is deterministic for a given seed.
+At each sample ``k`` (time ``t_k = k * dt``) the robot observes its pose and velocity
+(odometry), the person detections that have arrived (:class:`~companion.sim.sensing.PersonSensor`)
+and the obstacles it knows; the command is held for one period while the robot's actual
+velocities follow it through the first-order lag ``sensing.actuator_tau_s`` and the unicycle
+is integrated along the arc of the period's mean velocity (exact without lag,
+:func:`companion.geometry.unicycle_step`). Row ``k`` of the log holds the true state at
+``t_k``, the command applied from ``t_k`` on and the tracker's estimate. The run is
+deterministic for a given seed.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -19,22 +21,14 @@ from companion.control.base import Controller
 from companion.errors import ConfigError
 from companion.geometry import clearance, unicycle_step, wrap_pi
 from companion.model import relative_state, robot_pose_at, slot_reference
-from companion.params import Params
+from companion.params import IDEAL, Params
 from companion.sim.faults import Fault, stalled
 from companion.sim.faults import apply as apply_faults
 from companion.sim.person import PersonMotion
-from companion.sim.sensing import GroundTruth, Perception
+from companion.sim.sensing import GroundTruth, Perception, PersonSensor
 from companion.types import LOG_COLUMNS, Command, Log, Observation, Obstacle, PersonState, Pose
 
-
-@dataclass(frozen=True)
-class SensorNoise:
-    """Standard deviations of zero-mean Gaussian noise on the person observation."""
-
-    position: float = 0.0   # m, on x and y
-    heading: float = 0.0    # rad
-    speed: float = 0.0      # m/s
-    turn_rate: float = 0.0  # rad/s
+_NO_ESTIMATE = (math.nan,) * 6
 
 
 def start_in_slot(person: PersonState, params: Params) -> Pose:
@@ -42,15 +36,6 @@ def start_in_slot(person: PersonState, params: Params) -> Pose:
     f = params.formation
     return Pose(*robot_pose_at(f.distance, f.bearing, 0.0, person.x, person.y, person.theta,
                                params.robot.d))
-
-
-def _observe(person: PersonState, noise: SensorNoise, rng: np.random.Generator) -> PersonState:
-    if noise == SensorNoise():
-        return person
-    e = rng.normal(size=5)
-    return PersonState(person.x + noise.position * e[0], person.y + noise.position * e[1],
-                       person.theta + noise.heading * e[2], person.v + noise.speed * e[3],
-                       person.omega + noise.turn_rate * e[4])
 
 
 def nearest_clearance(x: float, y: float, obstacles: Sequence[Obstacle], footprint: float
@@ -61,31 +46,41 @@ def nearest_clearance(x: float, y: float, obstacles: Sequence[Obstacle], footpri
     return min(clearance(ob, x, y, footprint) for ob in obstacles)
 
 
+def lagged(actual: float, command: float, tau: float, dt: float) -> tuple[float, float]:
+    """``(next, mean)``: a first-order lag of time constant ``tau`` from ``actual`` towards
+    ``command`` held over ``dt``: the value after ``dt`` and the mean over it."""
+    if tau <= 0.0:
+        return command, command
+    a = math.exp(-dt / tau)
+    return command + (actual - command) * a, command + (actual - command) * tau / dt * (1 - a)
+
+
 def run_episode(controller: Controller, person: PersonMotion, params: Params,
                 duration: float, start: Pose | None = None, seed: int = 0,
-                noise: SensorNoise = SensorNoise(), obstacles: Sequence[Obstacle] = (),
-                perception: Perception | None = None, faults: Sequence[Fault] = (),
+                obstacles: Sequence[Obstacle] = (), perception: Perception | None = None,
+                faults: Sequence[Fault] = (),
                 start_velocity: tuple[float, float] | None = None) -> Log:
     """Simulate ``duration`` seconds and return the log.
 
     Parameters
     ----------
     controller : Controller
-        Reset before the first step.
+        Reset before the first step. A controller with ``takes_detections`` (the standard
+        stack) gets the person detections of ``params.sensing``; any other gets the true
+        person state, which needs ideal sensing.
     person : PersonMotion
     params : Params
     duration : float
         Simulated time (s); ``round(duration / dt)`` steps are run.
     start : Pose, optional
-        Robot start; default: in the desired slot, aligned with the person.
+        Robot start; default: in the desired slot, aligned with the person, already walking
+        with it (its velocity the slot's, its tracker handed the person's state).
     start_velocity : (v, omega), optional
-        The robot's velocity at the start, told to the controller as the command being
-        applied (``controller.applied``) so that its acceleration limits start from it.
-        Default: with ``start`` None, the slot velocity (already walking with the person);
-        with a ``start``, at rest.
+        The robot's velocity at the start, told to the controller (``controller.applied``) so
+        that its acceleration limits start from it. Default: with ``start`` None, the slot
+        velocity; with a ``start``, at rest.
     seed : int
-        Seed of the sensor-noise generator.
-    noise : SensorNoise
+        Seed of the sensing noise.
     obstacles : sequence of Circle or Wall
         The world's static obstacles.
     perception : Perception, optional
@@ -93,13 +88,18 @@ def run_episode(controller: Controller, person: PersonMotion, params: Params,
     faults : sequence of Fault
         Faults injected into what the controller observes (:mod:`companion.sim.faults`).
     """
-    dt, d = params.dt, params.robot.d
+    dt, d, tau = params.dt, params.robot.d, params.sensing.actuator_tau_s
     f = params.formation
     n = int(round(duration / dt))
     if n < 1:
         raise ConfigError(f"duration: expected at least one sample period ({dt:g} s), "
                           f"got {duration:g} s")
+    detections = getattr(controller, "takes_detections", False)
+    if not detections and params.sensing != IDEAL:
+        raise ConfigError("sensing: a controller without the standard stack sees the true "
+                          "person state, which needs ideal sensing")
     rng = np.random.default_rng(seed)
+    sensor = PersonSensor(params, person, rng)
     out = np.empty((n, len(LOG_COLUMNS)))
     status: list[str] = []
     reason: list[str] = []
@@ -107,34 +107,50 @@ def run_episode(controller: Controller, person: PersonMotion, params: Params,
     perception = perception or GroundTruth()
     perception.reset()
     controller.reset()
+    handover = ()
     if start is None:
         h0 = person.state(0.0)
         pose = start_in_slot(h0, params)
         ref = slot_reference(h0.v, h0.omega, f.distance, f.bearing, d)
         start_velocity = start_velocity or (ref.v, ref.omega)
+        handover = (sensor.handover(0.0),) if detections else ()
     else:
         pose = start
     if start_velocity is not None:
         controller.applied(Command(*start_velocity))
     x, y, th = pose.x, pose.y, pose.theta
+    va, wa = start_velocity or (0.0, 0.0)
     cmd = Command(0.0, 0.0)
+    seen = None   # where the robot believes the person is (for the LiDAR's person exclusion)
     for k in range(n):
         t = k * dt
         h = person.state(t)
-        seen = _observe(h, noise, rng)
-        known = perception.obstacles(k, Pose(x, y, th), obstacles, (h.x, h.y),
-                                     (seen.x, seen.y), rng)
+        arrived = (*handover, *sensor.detections(t)) if detections else ()
+        handover = ()
+        if not detections:
+            seen = (h.x, h.y)
+        elif arrived:
+            seen = (arrived[-1].x, arrived[-1].y)
+        known = perception.obstacles(k, Pose(x, y, th), obstacles, (h.x, h.y), seen, rng)
         if not stalled(faults, t):  # a stalled controller leaves the last command in force
-            obs = Observation(t, Pose(x, y, th), seen, known, perception.scan())
+            obs = Observation(t, Pose(x, y, th), None if detections else h, known,
+                              perception.scan(), (va, wa), arrived)
             cmd = controller.step(apply_faults(obs, faults))
+        e = cmd.estimate
+        if e is not None and detections:
+            seen = (e.state.x, e.state.y)
+        est = _NO_ESTIMATE if e is None else (e.state.x, e.state.y, e.state.theta, e.state.v,
+                                              e.state.omega, e.position_std)
         rho, alpha, beta = relative_state(x, y, th, h.x, h.y, h.theta, d)
         beta_ref = slot_reference(h.v, h.omega, f.distance, f.bearing, d).beta
         out[k] = (t, x, y, th, h.x, h.y, h.theta, h.v, h.omega, rho, alpha, beta,
                   f.distance, f.bearing, beta_ref, cmd.v, cmd.omega, cmd.u_ob,
-                  nearest_clearance(x, y, obstacles, params.robot.radius))
+                  nearest_clearance(x, y, obstacles, params.robot.radius), va, wa, *est)
         status.append(cmd.status)
         reason.append(cmd.reason)
-        x, y, th = unicycle_step(x, y, th, cmd.v, cmd.omega, dt)
+        va, v_mean = lagged(va, cmd.v, tau, dt)
+        wa, w_mean = lagged(wa, cmd.omega, tau, dt)
+        x, y, th = unicycle_step(x, y, th, v_mean, w_mean, dt)
         th = wrap_pi(th)
     columns: dict[str, np.ndarray] = {name: out[:, i] for i, name in enumerate(LOG_COLUMNS)}
     columns["status"] = np.array(status, dtype=str)

@@ -5,9 +5,9 @@ A :class:`Fault` is active for ``start <= t < end`` (simulated time, s) and chan
 itself is unchanged. Kinds (:data:`KINDS`):
 
 ========================  ==========================================================
-``person_dropout``        no person estimate (tracker lost the person)
-``person_nan``            person estimate with NaN in every field
-``person_jump``           person estimate offset by ``(dx, dy)`` m (identity switch)
+``person_dropout``        no person detection (the detector lost the person)
+``person_nan``            person detections with NaN positions
+``person_jump``           person detections offset by ``(dx, dy)`` m (identity switch)
 ``robot_nan``             robot pose NaN (localisation failure)
 ``obstacle_nan``          an extra obstacle with NaN centre in the obstacle list
 ``scan_blackout``         every LiDAR return NaN, so nothing is detected either
@@ -31,7 +31,7 @@ import numpy as np
 
 from companion.config import Validated, build, non_negative, param, positive
 from companion.errors import ConfigError
-from companion.types import Circle, Observation, PersonState, Pose, Scan
+from companion.types import Circle, Observation, Pose, Scan
 
 KINDS = ("person_dropout", "person_nan", "person_jump", "robot_nan", "obstacle_nan",
          "scan_blackout", "clock_freeze", "clock_backward", "stall")
@@ -85,6 +85,13 @@ def stalled(faults: Sequence[Fault], t: float) -> bool:
     return any(f.kind == "stall" and f.active(t) for f in faults)
 
 
+def _person(obs: Observation, change) -> Observation:
+    """``obs`` with ``change`` applied to its person and to each of its detections."""
+    return dataclasses.replace(
+        obs, person=None if obs.person is None else change(obs.person),
+        detections=tuple(change(d) for d in obs.detections))
+
+
 def apply(obs: Observation, faults: Sequence[Fault]) -> Observation:
     """The observation as corrupted by the faults active at ``obs.t``."""
     t = obs.t
@@ -92,13 +99,12 @@ def apply(obs: Observation, faults: Sequence[Fault]) -> Observation:
         if not f.active(t):
             continue
         if f.kind == "person_dropout":
-            obs = dataclasses.replace(obs, person=None)
-        elif f.kind == "person_nan" and obs.person is not None:
-            obs = dataclasses.replace(obs, person=PersonState(_NAN, _NAN, _NAN, _NAN, _NAN))
-        elif f.kind == "person_jump" and obs.person is not None:
-            h = obs.person
-            obs = dataclasses.replace(obs, person=dataclasses.replace(h, x=h.x + f.dx,
-                                                                      y=h.y + f.dy))
+            obs = dataclasses.replace(obs, person=None, detections=())
+        elif f.kind == "person_nan":
+            obs = _person(obs, lambda p: dataclasses.replace(p, x=_NAN, y=_NAN))
+        elif f.kind == "person_jump":
+            obs = _person(obs, lambda p, f=f: dataclasses.replace(p, x=p.x + f.dx,
+                                                                  y=p.y + f.dy))
         elif f.kind == "robot_nan":
             obs = dataclasses.replace(obs, robot=Pose(_NAN, _NAN, _NAN))
         elif f.kind == "obstacle_nan":

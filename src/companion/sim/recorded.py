@@ -19,7 +19,6 @@ from scipy.interpolate import make_smoothing_spline
 from companion.errors import DataError
 from companion.geometry import wrap_pi
 from companion.io import parse_number
-from companion.sim.faults import Fault
 from companion.types import PersonState
 
 #: Column names a person CSV must have, in this order.
@@ -32,12 +31,18 @@ DEFAULT_SMOOTHING = 0.5
 DEFAULT_STANDING_SPEED = 0.1
 #: Default step (s) of the grid on which the smoothed motion is tabulated.
 DEFAULT_GRID_STEP = 0.01
+#: A gap between samples is a hole (the person not observed) when it is longer than this (s)
+#: and than HOLE_RATIO times the track's median sample interval (:func:`holes`).
+HOLE_MIN_S = 1.0
+HOLE_RATIO = 3.0
 
 
 class RecordedPerson:
-    """A person replaying recorded positions, with smoothed heading, speed and turn rate.
+    """A person replaying recorded positions: the true path of a simulation, from which the
+    sensing model samples detections (the controller never sees the spline itself).
 
-    Implements the :class:`companion.sim.person.PersonMotion` protocol.
+    Implements the :class:`companion.sim.person.PersonMotion` protocol; :meth:`observed` is
+    False inside the recording's holes (:func:`holes`), where no detection is made.
 
     Parameters
     ----------
@@ -59,6 +64,8 @@ class RecordedPerson:
     ----------
     t0 : float
         Original time (s) of the first sample.
+    holes : tuple of (start, end)
+        The recording's holes (s, relative to the first sample).
     samples_t, samples_x, samples_y : ndarray
         The samples, time shifted to start at 0.
     grid : dict of ndarray
@@ -92,6 +99,7 @@ class RecordedPerson:
         self.samples_t = t_arr - self.t0
         self.samples_x = x_arr
         self.samples_y = y_arr
+        self.holes = holes(self.samples_t)
         grid = _tabulate(self.samples_t, x_arr, y_arr, self.smoothing, self.standing_speed,
                          grid_step)
         self._step = float(grid["t"][1] - grid["t"][0])
@@ -108,6 +116,10 @@ class RecordedPerson:
     def duration(self) -> float:
         """Time (s) from the first to the last sample."""
         return float(self.samples_t[-1])
+
+    def observed(self, t: float) -> bool:
+        """Whether the person could be detected at ``t`` (not inside a hole)."""
+        return not any(a < t < b for a, b in self.holes)
 
     def state(self, t: float) -> PersonState:
         """Smoothed person state at time ``t`` (s, first sample at 0); see the class notes."""
@@ -297,10 +309,13 @@ def _parse_row(name: str, line: int, row: list[str]) -> tuple[float, float, floa
     return t, x, y
 
 
-def gap_faults(person: RecordedPerson, timeout: float) -> tuple[Fault, ...]:
-    """The gaps between samples longer than ``timeout`` (s) as ``person_dropout`` faults: the
-    person was not observed there, so the controller must not see an interpolation across
-    them (docs/safety.md, fault 1). Times are relative to the first sample."""
-    t = person.samples_t
-    gaps = np.flatnonzero(np.diff(t) > timeout)
-    return tuple(Fault("person_dropout", float(t[i]), float(t[i + 1])) for i in gaps)
+def holes(t: np.ndarray, min_gap: float = HOLE_MIN_S, ratio: float = HOLE_RATIO
+          ) -> tuple[tuple[float, float], ...]:
+    """The gaps between samples at ``t`` where the person was not observed: gaps longer than
+    ``min_gap`` s and than ``ratio`` times the track's median sample interval. A sparse but
+    regular track has none."""
+    gaps = np.diff(t)
+    if gaps.size == 0:
+        return ()
+    long = (gaps > min_gap) & (gaps > ratio * float(np.median(gaps)))
+    return tuple((float(t[i]), float(t[i + 1])) for i in np.flatnonzero(long))

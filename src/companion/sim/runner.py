@@ -23,7 +23,7 @@ from companion.control import make_controller
 from companion.control.keepout import evasive_target
 from companion.errors import ConfigError
 from companion.params import Params
-from companion.sim.episode import SensorNoise, run_episode
+from companion.sim.episode import run_episode
 from companion.sim.faults import Fault
 from companion.sim.person import PersonMotion
 from companion.sim.sensing import make_perception
@@ -45,14 +45,13 @@ class EpisodeSpec:
     """"truth": the controller knows the obstacles exactly; "lidar": it sees what the
     simulated LiDAR detects."""
     faults: tuple[Fault, ...] = field(default_factory=tuple)
-    noise: SensorNoise = SensorNoise()
     start_velocity: tuple[float, float] | None = None
 
 
 def run_one(spec: EpisodeSpec) -> Log:
     """Simulate one episode of the standard stack of ``spec.controller``."""
     return run_episode(make_controller(spec.controller, spec.params), spec.person, spec.params,
-                       spec.duration, start=spec.start, seed=spec.seed, noise=spec.noise,
+                       spec.duration, start=spec.start, seed=spec.seed,
                        obstacles=spec.obstacles,
                        perception=make_perception(spec.obstacle_source, spec.params),
                        faults=spec.faults, start_velocity=spec.start_velocity)

@@ -37,7 +37,9 @@ Example::
     end = 13.5
 
 ``obstacle_source`` (top level) is "truth" (the controller knows the obstacles exactly) or
-"lidar" (it sees what the simulated LiDAR detects).
+"lidar" (it sees what the simulated LiDAR detects). ``sensing`` (top level) is "ideal",
+"realistic" or a ``[sensing]`` table (docs/sensing.md; missing keys: realistic); without it
+the sensing is ideal.
 """
 
 from __future__ import annotations
@@ -61,10 +63,10 @@ from companion.config import (
 )
 from companion.errors import ConfigError
 from companion.model import relative_state
-from companion.params import LEFT, RIGHT, Params, params_from_mapping
+from companion.params import LEFT, RIGHT, Params, params_from_mapping, sensing_params
 from companion.sim.faults import Fault, faults_from_list
 from companion.sim.person import Figure8, PersonMotion, Segment, SegmentPath, circle, line, u_shape
-from companion.sim.recorded import RecordedPerson, gap_faults, load_person_csv
+from companion.sim.recorded import load_person_csv
 from companion.sim.runner import EpisodeSpec, run_one
 from companion.sim.sensing import check_source
 from companion.types import Circle, Log, Obstacle, Pose, Wall
@@ -228,7 +230,7 @@ class Scenario:
 
 
 TOP_KEYS = ("name", "description", "duration", "seed", "controller", "obstacle_source",
-            "person", "robot", "obstacles", "params", "faults")
+            "sensing", "person", "robot", "obstacles", "params", "faults")
 
 
 def _resolve_auto_side(params_map: dict, start: Pose | None, person: PersonMotion,
@@ -295,11 +297,11 @@ def scenario_from_mapping(data: Mapping[str, Any], source: str, base_dir: Path,
         params_map = deep_merge(params_map, params_override)
     params_map = _resolve_auto_side(dict(params_map), start, person, where)
     params = params_from_mapping(params_map, prefix=f"{where}params.")
+    if "sensing" in data:
+        params = params.replace(sensing=sensing_params(data["sensing"], f"{where}sensing"))
     obstacles = obstacles_from_list(data.get("obstacles", []), where)
     obstacle_source = check_source(data.get("obstacle_source", "truth"), where)
     faults = faults_from_list(data.get("faults", []), f"{where}faults")
-    if isinstance(person, RecordedPerson):   # gaps in a recording are outages (fault 1)
-        faults += gap_faults(person, params.supervisor.person_timeout)
     return Scenario(name, description, float(duration), seed, controller, person, start,
                     params, source, obstacles, obstacle_source, faults)
 

@@ -1,9 +1,11 @@
-"""How the controller learns about obstacles in simulation: ground truth or a simulated LiDAR.
+"""What the robot senses in simulation: person detections and obstacles (docs/sensing.md).
 
-A perception model is asked once per control step for the obstacles the controller knows
-about (world frame). ``GroundTruth`` passes the world's obstacles through; ``LidarPerception``
-casts a scan at the LiDAR's rate, extracts circles from it (the tracked person excluded) and
-holds them until the next scan.
+:class:`PersonSensor` samples detections of the person from the true motion as the sensing
+profile says (rate, noise, latency, dropouts, holes in a recording). For obstacles a
+perception model is asked once per control step for the obstacles the controller knows about
+(world frame): ``GroundTruth`` passes the world's obstacles through; ``LidarPerception`` casts
+a scan at the LiDAR's rate, extracts circles from it (the tracked person excluded) and holds
+them until the next scan.
 """
 
 from __future__ import annotations
@@ -17,7 +19,72 @@ from companion.errors import ConfigError
 from companion.params import Params
 from companion.perception import extract_obstacles
 from companion.sim.lidar import cast
-from companion.types import Circle, Obstacle, Pose, Scan, Wall
+from companion.sim.person import PersonMotion
+from companion.types import Circle, Obstacle, PersonDetection, PersonState, Pose, Scan, Wall
+
+
+class PersonSensor:
+    """Detections of the person as ``params.sensing`` describes them.
+
+    A detection shows the true person at its time ``t_s`` (one every ``1 / person_rate_hz``
+    s from a random phase, or one per control step at an infinite rate) with Gaussian noise
+    on the position (and on heading, speed and turn rate where those are measured), and
+    arrives ``person_latency_s`` later. It is lost with probability ``person_dropout``, and
+    never made while the motion says the person is not observed (a hole in a recording).
+    """
+
+    def __init__(self, params: Params, person: PersonMotion, rng: np.random.Generator):
+        self.sensing, self.dt, self.person, self.rng = params.sensing, params.dt, person, rng
+        self.frame = params.tracker.world_frame
+        rate = self.sensing.person_rate_hz
+        self.period = 0.0 if rate == np.inf else 1.0 / rate   # 0: one per control step
+        self.next = rng.uniform(0.0, self.period) if self.period else 0.0
+
+    def handover(self, t: float) -> PersonDetection:
+        """A detection of the whole state with modest stds: the track a robot that was
+        already walking with the person brings into an episode."""
+        s, h = self.sensing, self.person.state(t)
+        pos = s.person_position_noise_m
+        stds = (0.1 if s.person_heading_noise_rad is None else s.person_heading_noise_rad,
+                0.1 if s.person_velocity_noise is None else s.person_velocity_noise)
+        e = self.rng.normal(size=5)
+        return PersonDetection(t, h.x + pos * e[0], h.y + pos * e[1], self.frame,
+                               (pos * pos, 0.0, 0.0, pos * pos), h.theta + stds[0] * e[2],
+                               stds[0], h.v + stds[1] * e[3], h.omega + stds[1] * e[4],
+                               (stds[1], stds[1]))
+
+    def detections(self, t: float) -> tuple[PersonDetection, ...]:
+        """The detections that arrive by control time ``t`` since the last call."""
+        last = t - self.sensing.person_latency_s
+        if not self.period:
+            times = [last] if last >= 0.0 else []
+        else:
+            times = []
+            while self.next <= last + 1e-9:
+                times.append(self.next)
+                self.next += self.period
+        return tuple(d for d in map(self._detect, times) if d is not None)
+
+    def _detect(self, ts: float) -> PersonDetection | None:
+        s = self.sensing
+        observed = getattr(self.person, "observed", None)
+        if (observed is not None and not observed(ts)) \
+                or (s.person_dropout > 0.0 and self.rng.random() < s.person_dropout):
+            return None
+        h: PersonState = self.person.state(ts)
+        pos = s.person_position_noise_m
+        e = self.rng.normal(size=2) if pos > 0.0 else (0.0, 0.0)
+        heading = speed = turn = heading_std = velocity_std = None
+        if s.person_heading_noise_rad is not None:
+            heading_std = s.person_heading_noise_rad
+            heading = h.theta + (heading_std * self.rng.normal() if heading_std else 0.0)
+        if s.person_velocity_noise is not None:
+            w = s.person_velocity_noise
+            ev = self.rng.normal(size=2) if w else (0.0, 0.0)
+            speed, turn, velocity_std = h.v + w * ev[0], h.omega + w * ev[1], (w, w)
+        return PersonDetection(ts, h.x + pos * e[0], h.y + pos * e[1], self.frame,
+                               (pos * pos, 0.0, 0.0, pos * pos), heading, heading_std, speed,
+                               turn, velocity_std)
 
 
 class Perception(Protocol):
@@ -50,13 +117,13 @@ class GroundTruth:
 
 class LidarPerception:
     """The controller sees what a simulated LiDAR detects: a scan every
-    ``round(1 / (lidar.rate * dt))`` steps, cast against the true obstacles and the person's
-    body, turned into circles by :func:`companion.perception.extract_obstacles` (the tracked
-    person, at its observed position, is excluded) and held until the next scan."""
+    ``round(1 / (sensing.lidar_rate_hz * dt))`` steps, cast against the true obstacles and the
+    person's body, turned into circles by :func:`companion.perception.extract_obstacles` (the
+    tracked person, at its estimated position, is excluded) and held until the next scan."""
 
     def __init__(self, params: Params):
         self.params = params
-        self.every = max(1, round(1.0 / (params.lidar.rate * params.dt)))
+        self.every = max(1, round(1.0 / (params.sensing.lidar_rate_hz * params.dt)))
         self.reset()
 
     def reset(self) -> None:

@@ -1,30 +1,20 @@
-"""Every parameter of companion, the paper's Table 1 values as defaults.
-
-One frozen, typed tree (:class:`Params`) validated in one place (:mod:`companion.config`).
-docs/parameters.md documents every field; a test keeps the two in step.
-"""
+"""Parameters of the controllers and the safety layers (sections of :class:`Params`)."""
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
-from pathlib import Path
-from typing import Any
 
 from companion.config import (
     Validated,
     all_non_negative,
     all_positive,
     all_positive_or_inf,
-    build,
-    load_toml,
+    fraction,
     non_negative,
     param,
     positive,
-    validate,
 )
-from companion.errors import ConfigError
 from companion.geometry import TWO_PI
 
 LEFT = 0.5 * math.pi
@@ -35,36 +25,12 @@ FRONT = 0.0
 SIDES = {"left": LEFT, "right": RIGHT, "behind": BEHIND, "front": FRONT}
 
 
-def _sample_period(x: float) -> str | None:
-    return None if 1e-3 <= x <= 1.0 else "a sample period in [0.001, 1] s"
-
-
 def _bearing(x: float) -> str | None:
     return None if 0.0 <= x < TWO_PI else "an angle in [0, 2*pi) rad"
 
 
-def _fraction(x: float) -> str | None:
-    return None if 0.0 <= x <= 1.0 else "a fraction in [0, 1]"
-
-
 def _step_ratio(x: float) -> str | None:
     return None if 1.0 < x < math.inf else "a finite ratio > 1"
-
-
-def _fov(x: float) -> str | None:
-    return None if 0.0 < x <= TWO_PI + 1e-9 else "an angle in (0, 2*pi] rad"
-
-
-def _resolution(x: float) -> str | None:
-    return None if 1e-4 <= x <= math.pi else "an angle in [0.0001, pi] rad"
-
-
-def _at_least_one(n: int) -> str | None:
-    return None if n >= 1 else "an integer >= 1"
-
-
-def _breakpoint_angle(x: float) -> str | None:
-    return None if 0.0 <= x < 0.5 * math.pi else "an angle in [0, pi/2) rad"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -149,6 +115,15 @@ class KeepOutParams(Validated):
                                 "robot's rate limit minus this", non_negative)
     contact_margin: float = param(0.02, "m", "clearance short of contact at which the braking "
                                   "bound towards obstacles stops the robot", non_negative)
+    uncertainty_sigmas: float = param(2.0, "-", "the protective distance grows by this many "
+                                      "standard deviations of where the person may be by the "
+                                      "time the robot reacts (the estimate's position and "
+                                      "velocity uncertainty over one period, the actuator lag "
+                                      "and the detection latency)", non_negative)
+    heading_sigmas: float = param(1.5, "-", "the evasive check also predicts the person "
+                                  "walking this many standard deviations of its estimated "
+                                  "heading to either side (at most pi/4); 0: only along it",
+                                  non_negative)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -161,26 +136,15 @@ class SupervisorParams(Validated):
                              "brake at this rate", positive)
     angular_accel_max: float = param(3.2, "rad/s^2", "limit on the rate of change of omega",
                                      positive)
-    person_timeout: float = param(0.5, "s", "a person estimate older than this is lost: brake "
-                                  "to a stop and hold (before it, the last estimate is "
-                                  "predicted forward at constant speed and turn rate)", positive)
-    max_person_speed: float = param(3.0, "m/s", "a person observation farther from the last "
-                                    "accepted one than this speed allows (plus jump_tolerance) "
-                                    "is an outlier (identity switch) and is rejected; a "
-                                    "reported person speed above it is clipped to it", positive)
-    max_person_turn_rate: float = param(TWO_PI, "rad/s", "a reported person turn rate above "
-                                        "this is clipped to it before the person is predicted "
-                                        "forward", positive)
-    jump_tolerance: float = param(0.2, "m", "position noise allowed on top of max_person_speed "
-                                  "in the outlier gate", non_negative)
-    reacquire_time: float = param(0.3, "s", "after the person was lost, observations must be "
-                                  "consistent with each other for this long before the robot "
-                                  "follows again", non_negative)
     max_step_ratio: float = param(3.0, "-", "a time step longer than max_step_ratio * dt (or "
                                   "zero, negative or not finite) is a clock fault: the "
                                   "controller's filters are reset", _step_ratio)
     min_valid_returns: float = param(0.5, "-", "fraction of a LiDAR scan's beams that must be "
-                                     "valid (not NaN); below it the robot stops", _fraction)
+                                     "valid (not NaN); below it the robot stops", fraction)
+    slot_error_m: float = param(1.0, "m", "a distance from the robot's reference point to its "
+                                "slot above this for longer than slot_error_time_s is reported "
+                                "(degraded: slot_error)", positive)
+    slot_error_time_s: float = param(2.0, "s", "see slot_error_m", positive)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -206,68 +170,6 @@ class AvoidanceParams(Validated):
                                "cone's edge (ours; a negative value uses the paper's phi)")
     tie_band: float = param(0.15, "rad", "inside the collision cone, obstacles with |phi| below "
                             "this are passed on the side away from the person", non_negative)
-
-
-@dataclasses.dataclass(frozen=True)
-class LidarParams(Validated):
-    """A simulated 2D LiDAR at the robot's pose (:mod:`companion.sim.lidar`)."""
-
-    fov: float = param(TWO_PI, "rad", "field of view, centred on the robot's heading, in "
-                       "(0, 2*pi]; 2*pi is a full 360 degree scan", _fov)
-    range_max: float = param(10.0, "m", "maximum range; beams hitting nothing closer return "
-                             "inf", positive)
-    resolution: float = param(math.radians(0.5), "rad",
-                              "angular step between beams (0.5 deg: 720 beams per revolution); "
-                              "for a full circle it is rounded so that it divides 2*pi",
-                              _resolution)
-    rate: float = param(10.0, "Hz", "scans per second; the simulator scans every "
-                        "round(1 / (rate * dt)) control steps and holds the result in between",
-                        positive)
-    noise_std: float = param(0.01, "m", "standard deviation of the Gaussian noise added to "
-                             "every finite range (clipped at 0); 0 = exact", non_negative)
-    person_radius: float = param(0.2, "m", "radius of the circle that stands for the person's "
-                                 "body in the scan", positive)
-
-
-@dataclasses.dataclass(frozen=True)
-class ExtractorParams(Validated):
-    """Turning a LiDAR scan into circular obstacles (:mod:`companion.perception`)."""
-
-    cluster_gap: float = param(0.15, "m", "consecutive returns farther apart than this (and "
-                               "than the adaptive breakpoint distance) start a new cluster; so "
-                               "does a beam without return", positive)
-    breakpoint_angle: float = param(math.radians(10.0), "rad",
-                                    "adaptive breakpoint (Borges & Aldon 2004): returns on a "
-                                    "surface seen at least this angle away from grazing stay in "
-                                    "one cluster, i.e. the gap threshold grows to r * sin(step) "
-                                    "/ sin(breakpoint_angle - step) at range r; 0 = fixed "
-                                    "cluster_gap only", _breakpoint_angle)
-    min_points: int = param(3, "-", "clusters with fewer returns are dropped as noise",
-                            _at_least_one)
-    max_segment: float = param(0.6, "m", "a cluster that is not one circle (a wall, a corner) "
-                               "and is longer than this is split into pieces of at most this "
-                               "length, each reported as its own circle", positive)
-    person_exclusion: float = param(0.5, "m", "circles whose centre is within person_radius + "
-                                    "this of the tracked person are the person and are not "
-                                    "reported (absorbs tracking error)", non_negative)
-    person_radius: float = param(0.2, "m", "radius of the person's body; should match "
-                                 "lidar.person_radius", positive)
-    piece_influence: float = param(0.5, "m", "avoidance influence range given to circles that "
-                                   "stand for pieces of a wall or a large object (like "
-                                   "avoidance.wall_influence for known walls)", positive)
-    min_radius: float = param(0.05, "m", "smallest reported radius", positive)
-    max_radius: float = param(1.0, "m", "largest fitted radius; a circle is only enlarged "
-                              "beyond it to cover its cluster's returns", positive)
-    fit_tolerance: float = param(0.04, "m", "largest RMS radial residual of an accepted "
-                                 "circle fit; the returns must also bulge towards the sensor by "
-                                 "twice this from their chord (about 2-4 x the range noise)",
-                                 positive)
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if self.min_radius > self.max_radius:
-            raise ConfigError(f"extractor.min_radius: expected at most max_radius "
-                              f"({self.max_radius:g} m), got {self.min_radius:g}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -313,84 +215,3 @@ class ImpedanceParams(Validated):
                                          "damping D (longitudinal, lateral)", all_non_negative)
     stiffness: tuple[float, float] = param((1.9, 18.99), "N/m",
                                            "stiffness K (longitudinal, lateral)", all_positive)
-
-
-@dataclasses.dataclass(frozen=True)
-class Params(Validated):
-    """Everything that tunes a run; defaults are the paper's Table 1."""
-
-    dt: float = param(0.05, "s", "sample period T of controller and simulator, in [0.001, 1]",
-                      _sample_period)
-    robot: RobotParams = param(RobotParams(), "", "")
-    formation: Formation = param(Formation(), "", "")
-    lqr: LqrParams = param(LqrParams(), "", "")
-    keepout: KeepOutParams = param(KeepOutParams(), "", "")
-    supervisor: SupervisorParams = param(SupervisorParams(), "", "")
-    avoidance: AvoidanceParams = param(AvoidanceParams(), "", "")
-    lidar: LidarParams = param(LidarParams(), "", "")
-    extractor: ExtractorParams = param(ExtractorParams(), "", "")
-    pid: PidParams = param(PidParams(), "", "")
-    vsm: VsmParams = param(VsmParams(), "", "")
-    impedance: ImpedanceParams = param(ImpedanceParams(), "", "")
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        f, k = self.formation, self.keepout
-        # robot centre (axle) in the slot, heading with the person: R - d e(theta_h)
-        centre = math.hypot(f.distance * math.cos(f.bearing) - self.robot.d,
-                            f.distance * math.sin(f.bearing))
-        for name, keep in (("keepout.person_clearance", k.person_clearance),
-                           ("keepout.protective_distance", k.protective_distance)):
-            if centre < keep:
-                raise ConfigError(
-                    f"formation.distance: the slot at {f.distance:g} m, bearing "
-                    f"{f.bearing:.3f} rad puts the robot centre {centre:.2f} m from the person, "
-                    f"inside {name} ({keep:g} m); expected a larger distance or a smaller "
-                    f"{name.split('.')[1]}")
-
-    def replace(self, **changes: Any) -> Params:
-        """A copy with top-level fields replaced, validated."""
-        out = dataclasses.replace(self, **changes)
-        validate(out)
-        return out
-
-
-def side_to_bearing(value: Any, name: str) -> Any:
-    """Map a side name to its bearing; other values pass through unchanged for validation."""
-    if isinstance(value, str):
-        if value not in SIDES:
-            raise ConfigError(f"{name}: expected a bearing in rad or one of "
-                              f"{', '.join(map(repr, SIDES))}, got {value!r}")
-        return SIDES[value]
-    return value
-
-
-#: Keys that moved to another section: old name -> new name (named in the error).
-MOVED = {"safety": "keepout", "supervisor.protective_distance": "keepout.protective_distance",
-         "supervisor.person_accel": "keepout.person_accel"}
-
-
-def _reject_moved(mapping: Mapping[str, Any], prefix: str) -> None:
-    for old, new in MOVED.items():
-        section, _, key = old.partition(".")
-        table = mapping.get(section)
-        if table is not None and (not key or (isinstance(table, Mapping) and key in table)):
-            raise ConfigError(f"{prefix}{old}: moved to {new} (docs/parameters.md)")
-
-
-def params_from_mapping(mapping: Mapping[str, Any], prefix: str = "") -> Params:
-    """Build validated :class:`Params` from a parsed TOML mapping."""
-    _reject_moved(mapping, prefix)
-    mapping = dict(mapping)
-    formation = mapping.get("formation")
-    if isinstance(formation, Mapping) and "bearing" in formation:
-        formation = dict(formation)
-        formation["bearing"] = side_to_bearing(formation["bearing"],
-                                               f"{prefix}formation.bearing")
-        mapping["formation"] = formation
-    return build(Params, mapping, prefix=prefix)
-
-
-def load_params(path: str | Path) -> Params:
-    """Load :class:`Params` from a TOML file; errors name the file and key."""
-    return params_from_mapping(load_toml(path), prefix=f"{path}: ")

@@ -1,0 +1,207 @@
+"""Parameters of sensing and perception (sections of :class:`Params`): the sensing profile,
+the person tracker, the simulated LiDAR and the obstacle extractor (docs/sensing.md)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from companion.config import (
+    Validated,
+    at_least_one,
+    non_negative,
+    param,
+    positive,
+    positive_or_inf,
+)
+from companion.errors import ConfigError
+from companion.geometry import TWO_PI
+
+
+def _fov(x: float) -> str | None:
+    return None if 0.0 < x <= TWO_PI + 1e-9 else "an angle in (0, 2*pi] rad"
+
+
+def _resolution(x: float) -> str | None:
+    return None if 1e-4 <= x <= math.pi else "an angle in [0.0001, pi] rad"
+
+
+def _breakpoint_angle(x: float) -> str | None:
+    return None if 0.0 <= x < 0.5 * math.pi else "an angle in [0, pi/2) rad"
+
+
+def _dropout(x: float) -> str | None:
+    return None if 0.0 <= x < 1.0 else "a probability in [0, 1)"
+
+
+def _probability(x: float) -> str | None:
+    return None if 0.0 < x < 1.0 else "a probability in (0, 1)"
+
+
+@dataclasses.dataclass(frozen=True)
+class SensingParams(Validated):
+    """What the robot senses and how its base answers (docs/sensing.md). The defaults are the
+    ``realistic`` profile; :data:`IDEAL` is the perfect person state at every step."""
+
+    person_rate_hz: float = param(10.0, "Hz", "person detections per second; inf: one at "
+                                  "every control step", positive_or_inf)
+    person_position_noise_m: float = param(0.05, "m", "standard deviation of the Gaussian "
+                                           "noise on each detected coordinate", non_negative)
+    person_heading_noise_rad: float | None = param(None, "rad", "standard deviation of the "
+                                                   "noise on a detected heading; absent: no "
+                                                   "heading is measured", non_negative)
+    person_velocity_noise: float | None = param(None, "m/s, rad/s", "standard deviation of the "
+                                                "noise on a detected speed and turn rate (a "
+                                                "tracker or tag upstream); absent: not "
+                                                "measured", non_negative)
+    person_latency_s: float = param(0.1, "s", "a detection arrives this long after the moment "
+                                    "it shows", non_negative)
+    person_dropout: float = param(0.02, "-", "probability that a detection is lost", _dropout)
+    actuator_tau_s: float = param(0.2, "s", "time constant of the first-order lag of the "
+                                  "robot's actual v and omega behind the command; 0: none",
+                                  non_negative)
+    lidar_rate_hz: float = param(10.0, "Hz", "LiDAR scans per second (held between scans)",
+                                 positive)
+
+
+#: Today's simulation: the exact person state at every control step, no lag.
+IDEAL = SensingParams(person_rate_hz=math.inf, person_position_noise_m=0.0,
+                      person_heading_noise_rad=0.0, person_velocity_noise=0.0,
+                      person_latency_s=0.0, person_dropout=0.0, actuator_tau_s=0.0)
+#: A person detector like a LiDAR leg tracker or UWB tag, and a base with lag.
+REALISTIC = SensingParams()
+#: Profiles by name (``companion run --sensing NAME``).
+PROFILES = {"ideal": IDEAL, "realistic": REALISTIC}
+
+
+@dataclasses.dataclass(frozen=True)
+class TrackerParams(Validated):
+    """The person tracker (:mod:`companion.tracking`): two coordinated-turn models of a walker
+    (steady, manoeuvre) in an interacting multiple model of unscented Kalman filters, gated
+    detections and the track's status."""
+
+    world_frame: str = param("world", "-", "name of the frame of the robot pose; detections "
+                             "in it are taken as they are")
+    robot_frame: str = param("robot", "-", "name of the robot's own frame; detections in it "
+                             "are moved to the world frame with the robot pose at their time")
+    position_std_m: float = param(0.05, "m", "standard deviation of a detected coordinate "
+                                  "when the detection gives no covariance", positive)
+    heading_std_rad: float = param(0.1, "rad", "standard deviation of a detected heading when "
+                                   "the detection gives none", positive)
+    accel_std: float = param(0.3, "m/s^2", "steady walk model: white acceleration in x and "
+                             "y (how fast a walker changes velocity)", positive)
+    turn_accel_std: float = param(1.6, "rad/s^2", "steady walk model: white acceleration of "
+                                  "the turn rate", positive)
+    maneuver_accel_std: float = param(0.9, "m/s^2", "manoeuvre model (starting, stopping, "
+                                      "turning sharply): white acceleration in x and y",
+                                      positive)
+    maneuver_turn_accel_std: float = param(3.5, "rad/s^2", "manoeuvre model: white "
+                                           "acceleration of the turn rate", positive)
+    maneuver_start_rate: float = param(0.15, "1/s", "how often a steady walk turns into a "
+                                       "manoeuvre (the models' switching rate)", positive)
+    maneuver_end_rate: float = param(5.0, "1/s", "how often a manoeuvre ends", positive)
+    initial_maneuver: float = param(0.5, "-", "probability of the manoeuvre model when a "
+                                    "track starts", _probability)
+    gate_chi2: float = param(13.8, "-", "a detection whose squared Mahalanobis distance of "
+                             "position exceeds this is another person (13.8: 99.9 % for 2 "
+                             "degrees of freedom)", positive)
+    gate_floor_m: float = param(0.2, "m", "position tolerance always allowed in the gate (an "
+                                "exact sensor must not make the gate arbitrarily tight)",
+                                non_negative)
+    max_person_speed: float = param(3.0, "m/s", "a detection farther from the track than this "
+                                    "speed allows (plus gate_floor_m) is rejected; estimated "
+                                    "speeds are clipped to it", positive)
+    max_person_turn_rate: float = param(TWO_PI, "rad/s", "estimated turn rates are clipped to "
+                                        "this", positive)
+    max_delay_s: float = param(0.5, "s", "a detection older than this when it arrives is "
+                               "stale and rejected; later ones are merged in time order",
+                               positive)
+    future_tolerance_s: float = param(0.05, "s", "a detection from further in the future than "
+                                      "this is rejected (clock skew)", non_negative)
+    coast_after_s: float = param(0.3, "s", "no accepted detection for longer than this: the "
+                                 "person is predicted (degraded)", positive)
+    lost_after_s: float = param(0.5, "s", "no accepted detection for longer than this: the "
+                                "person is lost (stop)", positive)
+    uncertain_std_m: float = param(0.15, "m", "a position std above this is reported "
+                                   "(degraded: person_uncertain)", positive)
+    max_position_std_m: float = param(0.5, "m", "a position std above this loses the person",
+                                      positive)
+    reacquire_time_s: float = param(0.3, "s", "after the person was lost, detections must agree "
+                                    "with each other for this long before the track resumes",
+                                    non_negative)
+    standing_speed: float = param(0.2, "m/s", "below this estimated speed the person stands: "
+                                  "the heading is held at its last walking value and the turn "
+                                  "rate is 0 (positions alone tell no heading then)",
+                                  non_negative)
+    walking_heading_std_rad: float = param(0.5, "rad", "the person also stands while the "
+                                           "estimated heading is less certain than this",
+                                           positive)
+    initial_speed_std: float = param(0.7, "m/s", "std of the speed of a new track whose "
+                                     "detections give none", positive)
+    initial_turn_rate_std: float = param(0.5, "rad/s", "std of the turn rate of a new track",
+                                         positive)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.lost_after_s < self.coast_after_s:
+            raise ConfigError(f"tracker.lost_after_s: expected at least coast_after_s "
+                              f"({self.coast_after_s:g} s), got {self.lost_after_s:g}")
+
+
+@dataclasses.dataclass(frozen=True)
+class LidarParams(Validated):
+    """A simulated 2D LiDAR at the robot's pose (:mod:`companion.sim.lidar`)."""
+
+    fov: float = param(TWO_PI, "rad", "field of view, centred on the robot's heading, in "
+                       "(0, 2*pi]; 2*pi is a full 360 degree scan", _fov)
+    range_max: float = param(10.0, "m", "maximum range; beams hitting nothing closer return "
+                             "inf", positive)
+    resolution: float = param(math.radians(0.5), "rad",
+                              "angular step between beams (0.5 deg: 720 beams per revolution); "
+                              "for a full circle it is rounded so that it divides 2*pi",
+                              _resolution)
+    noise_std: float = param(0.01, "m", "standard deviation of the Gaussian noise added to "
+                             "every finite range (clipped at 0); 0 = exact", non_negative)
+    person_radius: float = param(0.2, "m", "radius of the circle that stands for the person's "
+                                 "body in the scan", positive)
+
+
+@dataclasses.dataclass(frozen=True)
+class ExtractorParams(Validated):
+    """Turning a LiDAR scan into circular obstacles (:mod:`companion.perception`)."""
+
+    cluster_gap: float = param(0.15, "m", "consecutive returns farther apart than this (and "
+                               "than the adaptive breakpoint distance) start a new cluster; so "
+                               "does a beam without return", positive)
+    breakpoint_angle: float = param(math.radians(10.0), "rad",
+                                    "adaptive breakpoint (Borges & Aldon 2004): returns on a "
+                                    "surface seen at least this angle away from grazing stay in "
+                                    "one cluster, i.e. the gap threshold grows to r * sin(step) "
+                                    "/ sin(breakpoint_angle - step) at range r; 0 = fixed "
+                                    "cluster_gap only", _breakpoint_angle)
+    min_points: int = param(3, "-", "clusters with fewer returns are dropped as noise",
+                            at_least_one)
+    max_segment: float = param(0.6, "m", "a cluster that is not one circle (a wall, a corner) "
+                               "and is longer than this is split into pieces of at most this "
+                               "length, each reported as its own circle", positive)
+    person_exclusion: float = param(0.5, "m", "circles whose centre is within person_radius + "
+                                    "this of the tracked person are the person and are not "
+                                    "reported (absorbs tracking error)", non_negative)
+    person_radius: float = param(0.2, "m", "radius of the person's body; should match "
+                                 "lidar.person_radius", positive)
+    piece_influence: float = param(0.5, "m", "avoidance influence range given to circles that "
+                                   "stand for pieces of a wall or a large object (like "
+                                   "avoidance.wall_influence for known walls)", positive)
+    min_radius: float = param(0.05, "m", "smallest reported radius", positive)
+    max_radius: float = param(1.0, "m", "largest fitted radius; a circle is only enlarged "
+                              "beyond it to cover its cluster's returns", positive)
+    fit_tolerance: float = param(0.04, "m", "largest RMS radial residual of an accepted "
+                                 "circle fit; the returns must also bulge towards the sensor by "
+                                 "twice this from their chord (about 2-4 x the range noise)",
+                                 positive)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.min_radius > self.max_radius:
+            raise ConfigError(f"extractor.min_radius: expected at most max_radius "
+                              f"({self.max_radius:g} m), got {self.min_radius:g}")

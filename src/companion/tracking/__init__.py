@@ -1,0 +1,15 @@
+"""Tracking the person: detections in, the person's state with its uncertainty out."""
+
+from companion.tracking.tracker import PersonTracker
+from companion.tracking.walker import (
+    Belief,
+    WalkerFilter,
+    coordinated_turn,
+    exact_detection,
+    is_exact,
+    predict,
+    process_noise,
+)
+
+__all__ = ["Belief", "PersonTracker", "WalkerFilter", "coordinated_turn", "exact_detection",
+           "is_exact", "predict", "process_noise"]

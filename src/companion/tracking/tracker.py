@@ -1,0 +1,255 @@
+"""The person tracker: timestamped detections -> the person's state at the control instant.
+
+Detections are checked (finite, known frame, not from the future, not stale), gated by the
+Mahalanobis distance of their position (another person, or an identity switch, falls
+outside), and merged in time order into the walker filter (:mod:`.walker`): a late
+detection re-filters the detections after it. Between detections the track is predicted;
+after ``lost_after_s`` s without one, or when its position grows too uncertain, the person is
+lost, and a new track needs ``reacquire_time_s`` s of consistent detections. An exact
+full-state detection (all stds 0, an ideal sensor) sets the state exactly. docs/sensing.md
+explains the choices.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from companion.geometry import wrap_pi
+from companion.params import TrackerParams
+from companion.tracking.walker import Belief, WalkerFilter, position_cov, predict
+from companion.types import PersonDetection, PersonEstimate, PersonState, Pose
+
+#: Largest plausible coordinate (m) and standard deviation (m, rad, m/s) of a detection.
+MAX_COORDINATE = 1e6
+
+
+def _plausible(d: PersonDetection) -> bool:
+    """Finite, with coordinates and uncertainties a person detector could give."""
+    values = [d.t, *(d.covariance or ()), *(d.velocity_std or ())]
+    values += [v for v in (d.heading, d.heading_std, d.speed, d.turn_rate) if v is not None]
+    return (all(math.isfinite(v) for v in values)
+            and abs(d.x) <= MAX_COORDINATE and abs(d.y) <= MAX_COORDINATE
+            and all(abs(v) <= MAX_COORDINATE for v in (*(d.covariance or ()), d.heading_std or 0.0,
+                                                       *(d.velocity_std or ()))))
+
+
+@dataclass(frozen=True)
+class _Posterior:
+    """The filter after applying ``detection`` (kept for re-filtering late detections)."""
+
+    t: float
+    detection: PersonDetection
+    belief: Belief
+
+
+class PersonTracker:
+    """See the module docstring. Drive it with :meth:`add` and :meth:`estimate` once per
+    control step; ``reacquired`` is True after a step that ended an outage."""
+
+    def __init__(self, params: TrackerParams):
+        self.params = params
+        self._filter = WalkerFilter(params)
+        self.reset()
+
+    def reset(self) -> None:
+        self._history: list[_Posterior] = []   # posteriors within max_delay_s, in time order
+        self._candidate: list[PersonDetection] = []   # consistent detections while lost
+        self._walking: float | None = None            # heading of the last walking estimate
+        self.lost = False
+        self.reacquired = False
+
+    @property
+    def reacquiring(self) -> bool:
+        return self.lost and bool(self._candidate)
+
+    # -- detections -------------------------------------------------------------------------
+
+    def add(self, detections: Sequence[PersonDetection], now: float,
+            pose_at: Callable[[float], Pose] | None = None,
+            reasons: list[str] | None = None) -> None:
+        """Take the detections that arrived by ``now`` (s, the sensor clock). ``pose_at(t)``
+        gives the robot pose at time ``t`` for detections in the robot frame. What was wrong
+        with a detection is appended to ``reasons``."""
+        reasons = [] if reasons is None else reasons
+        self.reacquired = False
+        good = [d for d in (self._checked(d, now, pose_at, reasons) for d in detections)
+                if d is not None]
+        for t in sorted({d.t for d in good}):
+            self._add_group([d for d in good if d.t == t], reasons)
+
+    def _checked(self, d: PersonDetection, now: float,
+                 pose_at: Callable[[float], Pose] | None,
+                 reasons: list[str]) -> PersonDetection | None:
+        """The detection in the world frame with plausible rates, or None (reason given)."""
+        p = self.params
+        if not _plausible(d):
+            reasons.append("person_invalid")
+            return None
+        if d.t > now + p.future_tolerance_s:
+            reasons.append("detection_future")
+            return None
+        if d.t < now - p.max_delay_s:
+            reasons.append("detection_stale")
+            return None
+        if d.frame == p.robot_frame and pose_at is not None:
+            r = pose_at(d.t)
+            c, s = math.cos(r.theta), math.sin(r.theta)
+            cov = d.covariance
+            if cov is not None:   # rotate the covariance with the frame: R C R'
+                rot = np.array(((c, -s), (s, c)))
+                cov = tuple((rot @ np.reshape(cov, (2, 2)) @ rot.T).ravel())
+            d = dataclasses.replace(
+                d, x=r.x + c * d.x - s * d.y, y=r.y + s * d.x + c * d.y, frame=p.world_frame,
+                covariance=cov, heading=None if d.heading is None else d.heading + r.theta)
+        elif d.frame != p.world_frame:
+            reasons.append("detection_frame")
+            return None
+        clipped = {}
+        if d.speed is not None and abs(d.speed) > p.max_person_speed:
+            clipped["speed"] = math.copysign(p.max_person_speed, d.speed)
+        if d.turn_rate is not None and abs(d.turn_rate) > p.max_person_turn_rate:
+            clipped["turn_rate"] = math.copysign(p.max_person_turn_rate, d.turn_rate)
+        if clipped:
+            reasons.append("person_rate_clipped")
+            d = dataclasses.replace(d, **clipped)
+        return d
+
+    def _add_group(self, group: list[PersonDetection], reasons: list[str]) -> None:
+        """Detections taken at one time: the best gated one updates the track."""
+        t = group[0].t
+        if self._history and not self.lost and t - self._history[-1].t > self.params.lost_after_s:
+            self.lost, self._candidate = True, []     # too long since the last one
+        if not self._history or self.lost:
+            self._reacquire(group)
+            return
+        before = [h for h in self._history if h.t < t]
+        if not before:                        # older than everything kept: too late to use
+            reasons.append("detection_stale")
+            return
+        later = [h.detection for h in self._history if h.t >= t]
+        prior = self._predicted(before[-1], t)
+        best = self._best(before[-1], prior, group)
+        if best is None:
+            reasons.append("person_outlier")
+            return
+        self._history = before
+        self._apply(best, prior)
+        for d in later:                       # re-filter what came after a late detection
+            self._apply(d, self._predicted(self._history[-1], d.t))
+        horizon = self._history[-1].t - self.params.max_delay_s
+        self._history = [h for h in self._history if h.t >= horizon] or self._history[-1:]
+
+    def _best(self, base: _Posterior, prior: Belief,
+              group: list[PersonDetection]) -> PersonDetection | None:
+        """The detection of ``group`` nearest to the track's ``prior`` (``base`` predicted to
+        the group's time), if it is inside the gate."""
+        p = self.params
+        x, cov = prior.x, prior.p
+        dt = group[0].t - base.t
+        best, best_d2 = None, p.gate_chi2
+        for d in group:
+            innov = np.array((d.x - x[0], d.y - x[1]))
+            if math.hypot(*innov) > p.max_person_speed * dt + p.gate_floor_m + 3 * _std(d, p):
+                continue
+            s = cov[:2, :2] + position_cov(d, p) + p.gate_floor_m ** 2 * np.eye(2)
+            d2 = float(innov @ np.linalg.solve(s, innov))
+            if d2 <= best_d2:
+                best, best_d2 = d, d2
+        return best
+
+    def _predicted(self, base: _Posterior, t: float) -> Belief:
+        """``base`` predicted to time ``t``."""
+        return self._filter.predict(base.belief, t - base.t)
+
+    def _apply(self, d: PersonDetection, prior: Belief) -> None:
+        """Append the posterior of the ``prior`` at ``d``'s time updated with ``d``."""
+        self._history.append(_Posterior(d.t, d, self._filter.update(prior, d)))
+
+    def _start(self, d: PersonDetection) -> _Posterior:
+        return _Posterior(d.t, d, self._filter.start(d))
+
+    def _reacquire(self, group: list[PersonDetection]) -> None:
+        """No track (or lost): the first detection starts one; after a loss, detections must
+        agree with each other for ``reacquire_time_s`` first."""
+        p = self.params
+        if not self._history and not self.lost:        # the first detection of an episode
+            self._history = [self._start(group[0])]
+            return
+        last = self._candidate[-1] if self._candidate else None
+        d = group[0]
+        if last is not None:
+            near = min(group, key=lambda g: math.hypot(g.x - last.x, g.y - last.y))
+            dt = near.t - last.t
+            if dt > 0.0 and math.hypot(near.x - last.x, near.y - last.y) \
+                    <= p.max_person_speed * dt + p.gate_floor_m and dt <= p.lost_after_s:
+                self._candidate.append(near)
+                if near.t - self._candidate[0].t >= p.reacquire_time_s - 1e-9:
+                    self._history = [self._start(self._candidate[0])]
+                    for c in self._candidate[1:]:
+                        self._apply(c, self._predicted(self._history[-1], c.t))
+                    self._candidate, self.lost, self.reacquired = [], False, True
+                return
+        self._candidate = [d]
+
+    # -- the estimate --------------------------------------------------------------------------
+
+    def estimate(self, now: float, reasons: list[str] | None = None) -> PersonEstimate | None:
+        """The person at ``now`` (s, the sensor clock), or None when there is no track or the
+        person is lost (then :attr:`lost` is set)."""
+        p = self.params
+        reasons = [] if reasons is None else reasons
+        if not self._history or self.lost:
+            return None
+        last = self._history[-1]
+        age = now - last.t
+        if age > p.lost_after_s:
+            self.lost, self._candidate = True, []
+            return None
+        belief = self._predicted(last, now)
+        x, cov = belief.x, belief.p
+        std = math.sqrt(max(float(np.max(np.linalg.eigvalsh(cov[:2, :2]))), 0.0))
+        if std > p.max_position_std_m:
+            self.lost, self._candidate = True, []
+            return None
+        status = "seen" if age <= p.coast_after_s else "predicted"
+        if status == "predicted":
+            reasons.append("person_predicted")
+        if std > p.uncertain_std_m:
+            reasons.append("person_uncertain")
+        if last.belief.exact:                 # an ideal sensor: exactly as detected
+            d = last.detection
+            heading, v = (d.heading, d.speed) if d.speed >= 0.0 else (d.heading + math.pi,
+                                                                       -d.speed)
+            state = predict(PersonState(d.x, d.y, wrap_pi(heading), v, d.turn_rate), age)
+            return PersonEstimate(state, std, cov, age, status, state)
+        state = PersonState(float(x[0]), float(x[1]), math.atan2(x[3], x[2]),
+                            math.hypot(x[2], x[3]), float(x[4]))
+        return PersonEstimate(state, std, cov, age, status, self._walker(state, cov))
+
+    def _walker(self, state: PersonState, cov: np.ndarray) -> PersonState:
+        """The formation's person: while standing (speed below ``standing_speed``, or its
+        heading less certain than ``walking_heading_std_rad``: positions tell no heading then)
+        facing the way it last walked, without speed or turning. A walking person's turn rate
+        is shrunk towards 0 by its uncertainty (a Wiener gain), so a poor estimate of it fades
+        out of the controllers' feedforward."""
+        p = self.params
+        across = np.array((-math.sin(state.theta), math.cos(state.theta)))
+        heading_var = float(across @ cov[2:4, 2:4] @ across)   # velocity across its direction
+        walking = state.v >= p.standing_speed \
+            and heading_var <= (p.walking_heading_std_rad * state.v) ** 2
+        if walking or self._walking is None:
+            self._walking = state.theta
+            w, var = state.omega, float(cov[4, 4])
+            return dataclasses.replace(state, omega=w * w * w / (w * w + var) if var else w)
+        return PersonState(state.x, state.y, self._walking, 0.0, 0.0)
+
+
+def _std(d: PersonDetection, p: TrackerParams) -> float:
+    if d.covariance is None:
+        return p.position_std_m
+    return math.sqrt(max(d.covariance[0], d.covariance[3], 0.0))

@@ -1,0 +1,211 @@
+"""The person tracker alone: checks, gating, late detections, prediction, loss and reacquiry,
+and the filter's consistency on a noisy walk."""
+
+import math
+
+import numpy as np
+import pytest
+
+from companion.params import TrackerParams
+from companion.tracking import (
+    PersonTracker,
+    coordinated_turn,
+    exact_detection,
+    predict,
+    process_noise,
+)
+from companion.types import PersonDetection, PersonState, Pose
+
+TP = TrackerParams()
+
+
+def seen(t, x, y, frame="world", **kw):
+    return PersonDetection(t, x, y, frame, **kw)
+
+
+def walk(tracker, times, path, noise=0.0, rng=None, now_lag=0.0):
+    """Feed one detection per time of ``path(t) -> (x, y)``; return the last estimate."""
+    for t in times:
+        x, y = path(t)
+        if noise:
+            x, y = x + noise * rng.standard_normal(), y + noise * rng.standard_normal()
+        tracker.add([seen(t, x, y)], t + now_lag)
+    return tracker.estimate(times[-1] + now_lag)
+
+
+def straight(t):
+    return 1.2 * t, 0.5
+
+
+def test_predict_follows_the_unicycle_arc():
+    h = PersonState(0.0, 0.0, 0.0, 1.0, 0.5)
+    q = predict(h, math.pi / 0.5)            # half a circle of radius 2
+    assert (q.x, q.y) == pytest.approx((0.0, 4.0), abs=1e-9)
+    assert predict(PersonState(1.0, 2.0, 0.0, 1.0, 0.0), 2.0).x == pytest.approx(3.0)
+    turned = coordinated_turn(np.array((0.0, 0.0, 1.0, 0.0, 0.5)), math.pi / 0.5)
+    assert turned == pytest.approx((0.0, 4.0, -1.0, 0.0, 0.5), abs=1e-9)
+
+
+def test_process_noise_is_symmetric_positive_semidefinite_and_grows_with_time():
+    q1, q2 = process_noise(0.1, 0.3, 1.5), process_noise(0.2, 0.3, 1.5)
+    assert np.allclose(q1, q1.T)
+    assert np.min(np.linalg.eigvalsh(q1)) >= -1e-15
+    assert np.all(np.diag(q2) > np.diag(q1))
+
+
+def test_an_exact_detection_sets_the_whole_state_exactly():
+    tr = PersonTracker(TP)
+    h = PersonState(1.0, 2.0, 0.3, 1.1, -0.2)
+    tr.add([exact_detection(0.0, h)], 0.0)
+    e = tr.estimate(0.0)
+    assert e.state == h and e.position_std == 0.0 and e.status == "seen"
+    later = tr.estimate(0.1)                # predicted exactly along the arc
+    assert later.state.x == pytest.approx(predict(h, 0.1).x, abs=1e-12)
+
+
+def test_noise_free_positions_give_speed_and_heading():
+    tr = PersonTracker(TP)
+    e = walk(tr, np.arange(0.0, 4.0, 0.1), straight)    # from a standing start: v = 0
+    assert e.state.v == pytest.approx(1.2, abs=0.02)
+    assert e.state.theta == pytest.approx(0.0, abs=0.01)
+    assert (e.state.x, e.state.y) == pytest.approx((1.2 * 3.9, 0.5), abs=0.005)
+
+
+def test_a_turning_walker_gives_its_turn_rate():
+    tr = PersonTracker(TP)
+    omega, r = 0.5, 2.0
+
+    def circle(t):
+        return r * math.sin(omega * t), r * (1.0 - math.cos(omega * t))
+
+    e = walk(tr, np.arange(0.0, 6.0, 0.1), circle)
+    assert e.state.omega == pytest.approx(omega, abs=0.03)
+    assert e.state.v == pytest.approx(omega * r, abs=0.03)
+
+
+def test_noisy_walk_estimates_are_consistent_with_their_covariance():
+    """On a walk with 5 cm noise the position error stays within what the covariance says
+    (normalised estimation error squared: mean near 2, rarely above the 99 % bound)."""
+    rng = np.random.default_rng(3)
+    tr = PersonTracker(TP)
+    nees, err = [], []
+    for t in np.arange(0.0, 30.0, 0.1):
+        x, y = _curvy(t) + 0.05 * rng.standard_normal(2)
+        tr.add([seen(t, x, y)], t)
+        e = tr.estimate(t)
+        if t > 2.0:
+            d = np.array((e.state.x, e.state.y)) - _curvy(t)
+            nees.append(float(d @ np.linalg.solve(e.covariance[:2, :2], d)))
+            err.append(math.hypot(*d))
+    assert np.sqrt(np.mean(np.square(err))) < 0.05          # better than one raw detection
+    assert 0.5 < np.mean(nees) < 4.0
+    assert np.mean(np.array(nees) > 9.21) < 0.05
+
+
+def _curvy(t):
+    return np.array((1.1 * t, 0.8 * math.sin(0.3 * t)))
+
+
+@pytest.mark.parametrize("bad, reason", [
+    (seen(math.nan, 0.0, 0.0), "person_invalid"),
+    (seen(1.0, math.inf, 0.0), "person_invalid"),
+    (seen(1.0, 0.0, 0.0, heading=math.nan), "person_invalid"),
+    (seen(1.0, 1e300, 0.0), "person_invalid"),                   # finite but absurd
+    (seen(2.0, 1.2, 0.5), "detection_future"),
+    (seen(0.2, 0.24, 0.5), "detection_stale"),
+    (seen(1.0, 1.2, 0.5, frame="camera"), "detection_frame"),
+])
+def test_bad_detections_are_rejected_with_a_reason(bad, reason):
+    tr = PersonTracker(TP)
+    walk(tr, np.arange(0.0, 0.91, 0.1), straight)
+    before = tr.estimate(1.0)
+    reasons = []
+    tr.add([bad], 1.0, reasons=reasons)
+    assert reasons == [reason]
+    assert tr.estimate(1.0).state == before.state
+
+
+def test_robot_frame_detections_use_the_pose_at_their_time():
+    tr = PersonTracker(TP)
+    robot = Pose(1.0, 2.0, math.pi / 2)          # facing +y
+    tr.add([seen(0.0, 1.0, 0.5, frame="robot", covariance=(0.04, 0.0, 0.0, 0.0001))], 0.0,
+           pose_at=lambda t: robot)
+    e = tr.estimate(0.0)
+    assert (e.state.x, e.state.y) == pytest.approx((0.5, 3.0))
+    # the covariance turns with the frame: the robot's x (large) is the world's y
+    assert e.covariance[1, 1] > 100 * e.covariance[0, 0]
+
+
+def test_another_person_is_gated_out_and_the_nearest_detection_is_taken():
+    tr = PersonTracker(TP)
+    walk(tr, np.arange(0.0, 2.0, 0.1), straight)
+    reasons = []
+    tr.add([seen(2.0, 2.4, 2.5)], 2.0, reasons=reasons)        # 2 m to the side: someone else
+    assert reasons == ["person_outlier"]
+    tr.add([seen(2.1, 2.52, 1.5), seen(2.1, 2.52, 0.5)], 2.1)   # two people: the nearer wins
+    assert tr.estimate(2.1).state.y == pytest.approx(0.5, abs=0.02)
+
+
+def test_late_and_out_of_order_detections_give_the_in_order_estimate():
+    rng = np.random.default_rng(0)
+    times = np.arange(0.0, 4.0, 0.1)
+    dets = [seen(t, *(np.array(straight(t)) + 0.03 * rng.standard_normal(2))) for t in times]
+    in_order = PersonTracker(TP)
+    for d in dets:
+        in_order.add([d], d.t)
+    shuffled = PersonTracker(TP)
+    shuffled.add([dets[0]], 0.0)
+    for k in range(1, len(dets) - 1, 2):          # pairs arrive swapped, one period late
+        shuffled.add([dets[k + 1], dets[k]], dets[k + 1].t)
+    shuffled.add([dets[-1]], dets[-1].t)
+    a, b = in_order.estimate(4.0), shuffled.estimate(4.0)
+    assert np.allclose((a.state.x, a.state.y, a.state.v), (b.state.x, b.state.y, b.state.v),
+                       atol=1e-9)
+
+
+def test_dropout_is_predicted_then_the_person_is_lost_and_reacquired():
+    tr = PersonTracker(TP)
+    walk(tr, np.arange(0.0, 4.05, 0.1), straight)      # last detection at t = 4.0
+    reasons = []
+    e = tr.estimate(4.2, reasons)
+    assert e.status == "seen" and reasons == []
+    e = tr.estimate(4.4, reasons)
+    assert e.status == "predicted" and "person_predicted" in reasons
+    assert e.state.x == pytest.approx(1.2 * 4.4, abs=0.01)    # carried on at its speed
+    assert tr.estimate(4.0 + TP.lost_after_s + 0.01) is None and tr.lost
+    tr.add([seen(5.0, 6.0, 0.5)], 5.0)
+    assert tr.reacquiring and tr.estimate(5.0) is None
+    for t in np.arange(5.1, 5.0 + TP.reacquire_time_s + 0.01, 0.1):
+        tr.add([seen(t, 1.2 * t, 0.5)], t)
+    assert tr.reacquired and not tr.lost
+    assert tr.estimate(5.3).state.x == pytest.approx(1.2 * 5.3, abs=0.05)
+
+
+def test_inconsistent_detections_do_not_reacquire():
+    tr = PersonTracker(TP)
+    walk(tr, np.arange(0.0, 1.05, 0.1), straight)
+    assert tr.estimate(2.0) is None
+    for k, t in enumerate(np.arange(2.0, 4.0, 0.1)):
+        tr.add([seen(t, 5.0 * (k % 2), 0.0)], t)      # two places 5 m apart, alternating
+    assert tr.lost and not tr.reacquired
+
+
+def test_a_person_who_stops_keeps_facing_the_way_they_walked():
+    tr = PersonTracker(TP)
+    walk(tr, np.arange(0.0, 3.0, 0.1), lambda t: (t * math.cos(0.8), t * math.sin(0.8)))
+    stop = (2.9 * math.cos(0.8), 2.9 * math.sin(0.8))
+    rng = np.random.default_rng(1)
+    for t in np.arange(3.0, 8.0, 0.1):
+        tr.add([seen(t, *(np.array(stop) + 0.02 * rng.standard_normal(2)))], t)
+    e = tr.estimate(7.9)
+    assert e.state.v < TP.standing_speed
+    assert e.walker.theta == pytest.approx(0.8, abs=0.15)
+    assert e.walker.v == 0.0 and e.walker.omega == 0.0
+
+
+def test_an_uncertain_track_is_reported():
+    tr = PersonTracker(TrackerParams(uncertain_std_m=0.05, position_std_m=0.1))
+    reasons = []
+    tr.add([seen(0.0, 0.0, 0.0)], 0.0)
+    assert tr.estimate(0.0, reasons).position_std == pytest.approx(0.1, rel=1e-3)
+    assert reasons == ["person_uncertain"]
