@@ -136,6 +136,14 @@ def test_robot_frame_detections_use_the_pose_at_their_time():
     assert e.covariance[1, 1] > 100 * e.covariance[0, 0]
 
 
+def test_a_robot_frame_detection_without_a_valid_robot_pose_is_rejected():
+    tr = PersonTracker(TP)
+    reasons = []
+    tr.add([seen(0.0, 1.0, 0.5, frame="robot")], 0.0,
+           pose_at=lambda t: Pose(math.nan, math.nan, math.nan), reasons=reasons)
+    assert reasons == ["person_invalid"] and tr.estimate(0.0) is None
+
+
 def test_another_person_is_gated_out_and_the_nearest_detection_is_taken():
     tr = PersonTracker(TP)
     walk(tr, np.arange(0.0, 2.0, 0.1), straight)

@@ -106,6 +106,9 @@ class PersonTracker:
             d = dataclasses.replace(
                 d, x=r.x + c * d.x - s * d.y, y=r.y + s * d.x + c * d.y, frame=p.world_frame,
                 covariance=cov, heading=None if d.heading is None else d.heading + r.theta)
+            if not _plausible(d):             # no valid robot pose at the detection's time
+                reasons.append("person_invalid")
+                return None
         elif d.frame != p.world_frame:
             reasons.append("detection_frame")
             return None

@@ -1,0 +1,59 @@
+"""Every controller beside real walkers under ideal and realistic sensing (docs/sensing.md).
+
+    python bench/sensing.py [--every N]
+
+Runs each ETH/UCY track of ../shared/data/pedestrians (mean speed > 0.6 m/s, >= 15 s), robot
+starting in its slot on the left and on the right, with every controller, once with the
+``ideal`` and once with the ``realistic`` sensing profile (about 10 minutes on 2 cores;
+``--every 3`` takes every third track). Prints per profile and controller the median and
+90th percentile of the per-run RMSE rho, the median RMSE alpha and the closest approach to
+the true person; the LQR against each baseline on the same runs; and the realistic profile's
+targets with PASS or MISS.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from companion.apps import pedestrians as walkers
+from companion.control import CONTROLLERS
+from companion.data import pedestrians
+from companion.params import IDEAL, REALISTIC, Params
+
+#: The realistic-profile targets for the default LQR (median rho, p90 rho, median alpha,
+#: closest approach): (key, bound, at most?).
+TARGETS = (("median_rho_m", 0.05, True), ("p90_rho_m", 0.12, True),
+           ("median_alpha_rad", 0.12, True), ("min_distance_m", 0.5, False))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--every", type=int, default=1, help="take every N-th track")
+    args = ap.parse_args()
+    tracks = pedestrians.select_tracks(pedestrians.load_scenes())[::args.every]
+    names = list(CONTROLLERS)
+    print(f"{len(tracks)} tracks x 2 sides x {len(names)} controllers")
+    for label, sensing in (("ideal", IDEAL), ("realistic", REALISTIC)):
+        rows = walkers.evaluate(tracks, Params(sensing=sensing), names, ("left", "right"))
+        table = walkers.table(rows)
+        print(f"\n{label}: {'controller':10s} {'median rho cm':>13s} {'p90 rho cm':>10s} "
+              f"{'median alpha':>12s} {'closest m':>9s}")
+        for name, t in table.items():
+            print(f"{'':{len(label) + 1}s} {name:10s} {t['median_rho_m'] * 100:13.2f} "
+                  f"{t['p90_rho_m'] * 100:10.2f} {t['median_alpha_rad']:12.3f} "
+                  f"{t['min_distance_m']:9.3f}")
+        for name, p in walkers.paired(rows, "lqr").items():
+            print(f"  lqr vs {name:9s}: lower rho in {p['better_rho']:.0%} of runs (median "
+                  f"diff {p['median_diff_rho'] * 100:+.2f} cm), lower alpha in "
+                  f"{p['better_alpha']:.0%} ({p['median_diff_alpha']:+.3f} rad)")
+    lqr = table["lqr"]
+    print("\nrealistic targets (lqr):")
+    for key, bound, at_most in TARGETS:
+        ok = lqr[key] <= bound if at_most else lqr[key] >= bound
+        print(f"  {key:16s} {lqr[key]:.3f} {'<=' if at_most else '>='} {bound}: "
+              f"{'PASS' if ok else 'MISS'}")
+    print(f"\nData: {pedestrians.CREDIT}")
+
+
+if __name__ == "__main__":
+    main()
