@@ -234,8 +234,8 @@ def test_a_reader_that_goes_away_ends_the_command_quietly_with_every_file_writte
     done = subprocess.run(["bash", "-c", f"set -o pipefail; {cmd}"], capture_output=True,
                           text=True, timeout=120)
     assert done.returncode == 0 and done.stderr == ""
-    assert sorted(p.name for p in out.iterdir()) == ["errors.png", "inputs.png", "log.csv",
-                                                      "metrics.json", "trajectory.png"]
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == [
+        "errors.png", "inputs.png", "log.csv", "metrics.json", "trajectory.png"]
 
 
 def test_run_with_realistic_sensing_logs_the_estimate(tmp_path, capsys):

@@ -1,5 +1,6 @@
 """Files in and out: input cells parsed with one-line errors, outputs written whole or not at
-all (to a temporary file, then renamed)."""
+all (to a temporary file, then renamed), and a command's outputs replaced together
+(:class:`Outputs`)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import io
 import json
 import math
 import os
+import shutil
 import tempfile
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
@@ -29,6 +31,15 @@ def parse_number(where: str, col: str, cell: str) -> float:
     return value
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _umask()
+
+
 def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
     """Call ``write(tmp_path)`` and atomically rename the result to ``path``.
 
@@ -39,6 +50,7 @@ def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     tmp_path = Path(tmp)
+    os.chmod(tmp_path, 0o666 & ~_UMASK)      # mkstemp makes it 0600: follow the umask
     try:
         write(tmp_path)
         os.replace(tmp_path, path)
@@ -69,3 +81,73 @@ def write_csv(path: str | Path, header: Sequence[str], rows: Iterable[Sequence[A
 def save_figure(fig: Any, path: str | Path, dpi: int = 120) -> Path:
     """Save a matplotlib figure atomically as PNG."""
     return atomic_write(path, lambda p: fig.savefig(p, dpi=dpi, format="png"))
+
+
+STAGING = ".staging-"
+
+
+class Outputs:
+    """The outputs of one run of ``command`` in ``folder``, all or nothing.
+
+    ``with Outputs(folder, "run") as stage:`` gives a hidden staging folder inside ``folder``
+    to write into. When the block ends normally the staged files replace every file the
+    previous run of ``command`` wrote there (a manifest, ``.<command>.outputs``, lists
+    them), so the folder never mixes two runs; when it ends with an exception (an error,
+    Ctrl-C, SIGTERM) the staging folder is removed and ``folder`` is left as it was.
+    Staging folders of processes that no longer exist (killed) are removed on entry.
+    """
+
+    def __init__(self, folder: str | Path, command: str):
+        self.folder, self.command = Path(folder), command
+        self.stage = self.folder / f"{STAGING}{command}-{os.getpid()}"
+        self._pid = os.getpid()
+
+    def __enter__(self) -> Path:
+        self.folder.mkdir(parents=True, exist_ok=True)
+        remove_stale(self.folder)
+        shutil.rmtree(self.stage, ignore_errors=True)
+        self.stage.mkdir()
+        return self.stage
+
+    def __exit__(self, kind, value, trace) -> None:
+        if os.getpid() != self._pid:        # a forked worker leaving: not its outputs
+            return
+        if kind is not None:
+            shutil.rmtree(self.stage, ignore_errors=True)
+            return
+        manifest = self.folder / f".{self.command}.outputs"
+        try:
+            old = json.loads(manifest.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            old = []
+        new = sorted(p.name for p in self.stage.iterdir())
+        for name in old:
+            if name not in new and isinstance(name, str) and "/" not in name:
+                (self.folder / name).unlink(missing_ok=True)
+        for name in new:
+            os.replace(self.stage / name, self.folder / name)
+        write_text(manifest, json.dumps(new) + "\n")
+        shutil.rmtree(self.stage, ignore_errors=True)
+
+
+def remove_stale(folder: Path) -> None:
+    """Remove the staging folders and temporary files in ``folder`` that processes which no
+    longer exist left behind."""
+    for path in folder.glob(f"{STAGING}*"):
+        pid = path.name.rsplit("-", 1)[-1]
+        if not (pid.isdigit() and _alive(int(pid))):
+            shutil.rmtree(path, ignore_errors=True)
+    for path in folder.glob(".*.tmp"):
+        path.unlink(missing_ok=True)
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return False                          # an earlier run of this very process
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True

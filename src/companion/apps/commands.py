@@ -10,8 +10,9 @@ import argparse
 import dataclasses
 import json
 import math
+import os
 import sys
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -25,7 +26,7 @@ from companion.control import CONTROLLERS, lookup
 from companion.data import pedestrians
 from companion.errors import CompanionError
 from companion.geometry import wrap_2pi
-from companion.io import save_figure, write_csv, write_json
+from companion.io import Outputs, save_figure, write_csv, write_json
 from companion.params import Params, load_sensing, params_from_mapping
 from companion.sim import convergence, soak
 from companion.sim.recorded import load_person_csv
@@ -134,21 +135,17 @@ def summary_lines(m: dict) -> list[str]:
         f"collisions {m['obstacle_collisions']}"])
 
 
-RUN_OUTPUTS = ("log.csv", "metrics.json", "trajectory.png", "errors.png", "inputs.png",
-               "avoidance.png")
-
-
-def output_dir(path: Path, stale: Sequence[str] = ()) -> Path:
-    """Check (before any work) that ``path`` can be an output folder, and remove the files
-    ``stale`` that an earlier run wrote there, so the folder never mixes two runs."""
+def output_dir(path: Path) -> Path:
+    """Check (before any work) that ``path`` can be an output folder; the outputs go into it
+    all together at the end (:class:`~companion.io.Outputs`)."""
     if path.exists() and not path.is_dir():
         raise UsageError(f"--out {path}: exists and is not a folder")
     try:
         path.mkdir(parents=True, exist_ok=True)
-        for name in stale:
-            (path / name).unlink(missing_ok=True)
     except OSError as exc:
         raise UsageError(f"--out {path}: cannot write there ({exc.strerror})") from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise UsageError(f"--out {path}: cannot write there (permission denied)")
     return path
 
 
@@ -169,24 +166,17 @@ def workers_arg(args: argparse.Namespace) -> int | None:
     return args.workers
 
 
-def cmd_run(args: argparse.Namespace) -> int:
-    sc = build_scenario(args)
-    lookup(sc.controller)  # unknown names: ConfigError with a hint
-    output_dir(Path(args.out or Path("out") / sc.name))
-    log = run_scenario(sc)
-    m = metrics.compute(log)
-    m["scenario"] = sc.name
-    m["controller"] = sc.controller
-    out = output_dir(Path(args.out or Path("out") / sc.name), RUN_OUTPUTS)
+def _write_run(out: Path, sc, plot: bool, log: Log, m: dict) -> list[str]:
+    """Write ``companion run``'s files into ``out``; returns their names."""
     write_log(out / "log.csv", log)
     write_json(out / "metrics.json", m)
     written = ["log.csv", "metrics.json"]
-    if args.plot:
+    if plot:
         title = f"{sc.name} / {sc.controller}"
         runs = {sc.controller: log}
         figures = [("trajectory.png", plots.trajectories(runs, title, obstacles=sc.obstacles,
                                                          avoidance=sc.params.avoidance,
-                             footprint=sc.params.robot.radius)),
+                                                         footprint=sc.params.robot.radius)),
                    ("errors.png", plots.errors_over_time(runs, title)),
                    ("inputs.png", plots.inputs_over_time(runs, sc.params, title))]
         if sc.obstacles:
@@ -196,6 +186,19 @@ def cmd_run(args: argparse.Namespace) -> int:
             save_figure(fig, out / name)
             plots.close(fig)
             written.append(name)
+    return written
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    sc = build_scenario(args)
+    lookup(sc.controller)  # unknown names: ConfigError with a hint
+    out = output_dir(Path(args.out or Path("out") / sc.name))
+    log = run_scenario(sc)
+    m = metrics.compute(log)
+    m["scenario"] = sc.name
+    m["controller"] = sc.controller
+    with Outputs(out, "run") as stage:
+        written = _write_run(stage, sc, args.plot, log, m)
     # Everything is written before anything is printed: a reader that goes away early
     # (| head) cannot cut the outputs short.
     print(f"{sc.name}: {sc.description}")
@@ -235,16 +238,17 @@ def cmd_convergence(args: argparse.Namespace) -> int:
         lines.append(f"{case.speed:5.2f} {case.label:>10} {case.start.theta:8.3f} "
                      f"{case.side:>5} {'never' if settle is None else f'{settle:.2f}':>9} "
                      f"{m['min_person_distance_m']:10.3f}{'' if ok else '  FAIL'}")
-    write_csv(out / "convergence.csv", (*convergence.CSV_COLUMNS, "ok"), rows)
-    written = ["convergence.csv"]
-    if args.plot:
-        for speed, speed_runs in runs.items():
-            fig = plots.convergence(speed_runs, f"Fig. 3: person at {speed:g} m/s, "
-                                                f"controller {args.controller}")
-            name = f"fig3_{speed:g}mps.png"
-            save_figure(fig, out / name)
-            plots.close(fig)
-            written.append(name)
+    with Outputs(out, "convergence") as stage:
+        write_csv(stage / "convergence.csv", (*convergence.CSV_COLUMNS, "ok"), rows)
+        written = ["convergence.csv"]
+        if args.plot:
+            for speed, speed_runs in runs.items():
+                fig = plots.convergence(speed_runs, f"Fig. 3: person at {speed:g} m/s, "
+                                                    f"controller {args.controller}")
+                name = f"fig3_{speed:g}mps.png"
+                save_figure(fig, stage / name)
+                plots.close(fig)
+                written.append(name)
     print(f"{'speed':>5} {'start':>10} {'heading':>8} {'side':>5} {'settle_s':>9} "
           f"{'min_dist_m':>10}")
     print("\n".join(lines))
@@ -270,8 +274,9 @@ def cmd_pedestrians(args: argparse.Namespace) -> int:
     with progress_bar(len(tracks) * len(sides) * len(controllers), "episode") as progress:
         rows = walkers.evaluate(tracks, params, controllers, sides, workers_arg(args),
                                 progress)
-    write_csv(out / "pedestrians.csv", walkers.COLUMNS,
-              ([r[k] for k in walkers.COLUMNS] for r in rows))
+    with Outputs(out, "pedestrians") as stage:
+        write_csv(stage / "pedestrians.csv", walkers.COLUMNS,
+                  ([r[k] for k in walkers.COLUMNS] for r in rows))
     print(walkers_text(walkers.table(rows), walkers.paired(rows, controllers[0])))
     print(f"wrote pedestrians.csv in {out}\n")
     print(pedestrians.CREDIT)
@@ -300,11 +305,12 @@ def cmd_soak(args: argparse.Namespace) -> int:
     print(f"soak: {duration:g} s of a random walker among pillars (seed {args.seed}), "
           f"controller {args.controller}; about {duration / 25:.0f} s")
     summary, log = soak.run_soak(duration, args.seed, args.controller, params)
-    write_json(out / "soak.json", summary)
-    written = ["soak.json"]
-    if args.log:
-        write_log(out / "log.csv", log)
-        written.append("log.csv")
+    with Outputs(out, "soak") as stage:
+        write_json(stage / "soak.json", summary)
+        written = ["soak.json"]
+        if args.log:
+            write_log(stage / "log.csv", log)
+            written.append("log.csv")
     for key, value in summary.items():
         print(f"  {key:26s} {value:.4g}" if isinstance(value, float) else f"  {key:26s} {value}")
     ok = summary["finite"] and summary["person_collisions"] == 0 \
@@ -320,8 +326,9 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     names = reproduce.controllers()
     print(f"Reproducing Fig. 3, Table 2, Fig. 4, Fig. 7 and Table 3 with {', '.join(names)} "
           f"into {out}")
-    with progress_bar(reproduce.episode_count(), "episode") as progress:
-        result = reproduce.reproduce(out, workers_arg(args), progress)
+    with progress_bar(reproduce.episode_count(), "episode") as progress, \
+            Outputs(out, "reproduce") as stage:
+        result = reproduce.reproduce(stage, workers_arg(args), progress)
     print(reproduce.fig3_summary(result.fig3))
     print("Table 2 (ours; paper's LQR/PID/VSM/IC rho and alpha at the right):")
     print(reproduce.table2_text(result.table2))

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import multiprocessing
 import os
+import signal
 import sys
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -115,9 +116,30 @@ def run_many(specs: Sequence[EpisodeSpec], workers: int | None = None,
     chunk = max(1, math.ceil(len(specs) / (4 * workers)))
     # fork (Linux) hands the workers the loaded kernels; elsewhere the platform's default
     context = multiprocessing.get_context("fork") if sys.platform.startswith("linux") else None
-    with ProcessPoolExecutor(max_workers=min(workers, len(specs)), mp_context=context) as pool:
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(specs)), mp_context=context,
+                               initializer=_worker_signals)
+    try:
         for result in pool.map(job, specs, chunksize=chunk):
             results.append(result)
             if progress:
                 progress(len(results))
+    except BaseException:
+        _stop(pool)       # an error, Ctrl-C or SIGTERM: do not wait for the remaining episodes
+        raise
+    pool.shutdown()
     return results
+
+
+def _worker_signals() -> None:
+    """Workers leave Ctrl-C to the parent and die on SIGTERM (the parent stops them)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def _stop(pool: ProcessPoolExecutor) -> None:
+    """Cancel what is queued and terminate the workers (concurrent.futures has no public way
+    to stop running work before Python 3.14)."""
+    processes = list(getattr(pool, "_processes", {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.terminate()
