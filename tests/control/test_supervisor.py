@@ -433,3 +433,27 @@ def test_recorded_hole_is_an_outage_and_a_sparse_track_is_not(tmp_path):
     person = load_person_csv(sparse)
     log = run_episode(make_controller("lqr", P), person, P, person.duration)
     assert "stopped" not in set(log["status"])
+
+
+def test_a_stalled_controller_is_stopped_by_the_base_command_timeout():
+    """The controller is not called for 2 s: the base holds the last command for
+    robot.command_timeout_s, then brakes to a stop at the deceleration limits."""
+    log = run([Fault("stall", 5.0, 7.0)], duration=10.0)
+    t, v = log["t"], log["robot_v"]
+    timeout = P.robot.command_timeout_s
+    last = 5.0 - DT                                   # the last command before the stall
+    held = (t > 5.0) & (t <= last + timeout + EPS)
+    assert np.allclose(v[held], v[np.searchsorted(t, 5.0)], atol=1e-9)
+    stop_by = 5.0 + timeout + P.robot.v_max / S.decel_max + 2 * DT
+    assert np.all(np.abs(v[(t > stop_by) & (t < 7.0)]) < 1e-9)
+    assert np.all(np.abs(np.diff(v[(t > 5.0) & (t < 7.0)])) <= S.decel_max * DT + EPS)
+
+
+def test_rate_limits_start_from_the_measured_velocity():
+    """A supervisor started on a robot already moving at 1 m/s (odometry), without being
+    told, does not command a sudden stop."""
+    sup = make_controller("lqr", P)
+    sup.reset()
+    h = PersonState(0.0, 1.0, 0.0, 1.0, 0.0)
+    cmd = sup.step(Observation(0.0, Pose(-0.25, 0.0, 0.0), h, robot_velocity=(1.0, 0.0)))
+    assert abs(cmd.v - 1.0) <= S.accel_max * DT + EPS

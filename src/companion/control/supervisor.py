@@ -53,6 +53,7 @@ class SafetySupervisor:
         self.inner.reset()
         self._inner_fresh = False     # inner must be reset before its next step
         self._prev = (0.0, 0.0)       # last output (v, omega)
+        self._started = False         # _prev is known (a step, or applied())
         self._clock.reset()
         self._tracker.reset()
         self._sensor_t = 0.0          # the sensor clock: the last valid time, periods counted on
@@ -88,6 +89,8 @@ class SafetySupervisor:
         if not stop and obs.scan is not None:
             stop = checks.scan_fault(obs.scan, p, reasons)
         velocity = self._velocity(obs)
+        if not self._started:         # the rate limits start from the measured velocity
+            self._prev, self._started = self._limited(velocity), True
 
         stepped = False
         target = (*self._prev, 0.0)
@@ -119,10 +122,13 @@ class SafetySupervisor:
         """Told the command the robot executes outside a step (its velocity at the start of an
         episode): the rate limits start from it."""
         if checks.finite(cmd.v, cmd.omega):
-            r = self.params.robot
-            self._prev = (min(max(cmd.v, -r.v_max), r.v_max),
-                          min(max(cmd.omega, -r.omega_max), r.omega_max))
+            self._prev, self._started = self._limited((cmd.v, cmd.omega)), True
             self.inner.applied(cmd)
+
+    def _limited(self, velocity: tuple[float, float]) -> tuple[float, float]:
+        r = self.params.robot
+        return (min(max(velocity[0], -r.v_max), r.v_max),
+                min(max(velocity[1], -r.omega_max), r.omega_max))
 
     # -- the pieces -----------------------------------------------------------------------
 

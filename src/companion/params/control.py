@@ -14,6 +14,7 @@ from companion.config import (
     non_negative,
     param,
     positive,
+    positive_or_inf,
 )
 from companion.geometry import TWO_PI
 
@@ -44,6 +45,10 @@ class RobotParams(Validated):
                              positive)
     radius: float = param(0.25, "m", "radius of the robot's footprint, a circle around the "
                           "wheel axle (for obstacle clearance and collisions)", positive)
+    command_timeout_s: float = param(0.5, "s", "the (simulated) base brakes to a stop at the "
+                                     "supervisor's deceleration limits when no command has "
+                                     "arrived for this long, as ros2_control's diff drive "
+                                     "controller does; inf: never", positive_or_inf)
 
 
 @dataclasses.dataclass(frozen=True)

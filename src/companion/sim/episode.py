@@ -55,6 +55,17 @@ def lagged(actual: float, command: float, tau: float, dt: float) -> tuple[float,
     return command + (actual - command) * a, command + (actual - command) * tau / dt * (1 - a)
 
 
+def timed_out(command: tuple[float, float], params: Params) -> tuple[float, float]:
+    """One period of a base whose commands stopped coming: ``command`` brought towards a stop
+    at the supervisor's deceleration limits."""
+    s, dt = params.supervisor, params.dt
+
+    def towards_zero(x: float, rate: float) -> float:
+        return math.copysign(max(abs(x) - rate * dt, 0.0), x)
+
+    return towards_zero(command[0], s.decel_max), towards_zero(command[1], s.angular_accel_max)
+
+
 def run_episode(controller: Controller, person: PersonMotion, params: Params,
                 duration: float, start: Pose | None = None, seed: int = 0,
                 obstacles: Sequence[Obstacle] = (), perception: Perception | None = None,
@@ -121,6 +132,8 @@ def run_episode(controller: Controller, person: PersonMotion, params: Params,
     x, y, th = pose.x, pose.y, pose.theta
     va, wa = start_velocity or (0.0, 0.0)
     cmd = Command(0.0, 0.0)
+    base = start_velocity or (0.0, 0.0)   # what the base executes: the last command, or a stop
+    last_command = 0.0
     seen = None   # where the robot believes the person is (for the LiDAR's person exclusion)
     for k in range(n):
         t = k * dt
@@ -136,6 +149,9 @@ def run_episode(controller: Controller, person: PersonMotion, params: Params,
             obs = Observation(t, Pose(x, y, th), None if detections else h, known,
                               perception.scan(), (va, wa), arrived)
             cmd = controller.step(apply_faults(obs, faults))
+            base, last_command = (cmd.v, cmd.omega), t
+        elif t - last_command >= params.robot.command_timeout_s - 1e-9:
+            base = timed_out(base, params)
         e = cmd.estimate
         if e is not None and detections:
             seen = (e.state.x, e.state.y)
@@ -148,8 +164,8 @@ def run_episode(controller: Controller, person: PersonMotion, params: Params,
                   nearest_clearance(x, y, obstacles, params.robot.radius), va, wa, *est)
         status.append(cmd.status)
         reason.append(cmd.reason)
-        va, v_mean = lagged(va, cmd.v, tau, dt)
-        wa, w_mean = lagged(wa, cmd.omega, tau, dt)
+        va, v_mean = lagged(va, base[0], tau, dt)
+        wa, w_mean = lagged(wa, base[1], tau, dt)
         x, y, th = unicycle_step(x, y, th, v_mean, w_mean, dt)
         th = wrap_pi(th)
     columns: dict[str, np.ndarray] = {name: out[:, i] for i, name in enumerate(LOG_COLUMNS)}
