@@ -261,3 +261,30 @@ def test_scenario_sensing_table_is_used_and_the_flag_overrides_it(tmp_path, caps
     std = a[0].split(",").index("person_est_std")
     assert float(a[-1].split(",")[std]) > 0.0       # 5 Hz noisy detections: uncertain
     assert float(b[-1].split(",")[std]) == 0.0      # ideal: exact
+
+
+def test_cli_choices_are_the_registries():
+    from companion.apps import cli
+    from companion.apps.tune import SPACES
+    from companion.control import CONTROLLERS
+    from companion.params import SIDES
+
+    assert cli.CONTROLLERS == tuple(sorted(CONTROLLERS))
+    assert cli.TUNABLE == tuple(sorted(SPACES))
+    assert cli.SIDES == tuple(sorted(SIDES))
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["run", "line", "--bogus"]])
+def test_help_and_usage_errors_load_no_numerics(argv):
+    """--help and usage errors answer without importing numpy, numba, scipy or matplotlib
+    (they would take a second and hundreds of MB)."""
+    import subprocess
+    import sys
+
+    code = (f"import sys\nfrom companion.apps.cli import main\ntry:\n    main({argv!r})\n"
+            "except SystemExit:\n    pass\n"
+            "print(sorted(m for m in ('numpy', 'numba', 'scipy', 'matplotlib') "
+            "if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)
+    assert done.stdout.strip().splitlines()[-1] == "[]", done.stdout + done.stderr

@@ -22,12 +22,10 @@ import functools
 import hashlib
 import os
 import shutil
+import sys
 import tempfile
 import time
 from pathlib import Path
-
-from numba import njit
-from numba.extending import register_jitable
 
 PACKAGE = Path(__file__).resolve().parent
 _JIT_OPTIONS = {"cache": True, "error_model": "numpy"}
@@ -35,11 +33,15 @@ _JIT_OPTIONS = {"cache": True, "error_model": "numpy"}
 
 def jitable(func):
     """Mark a plain function as callable from compiled kernels; returns it unchanged."""
+    from numba.extending import register_jitable  # numba only where kernels are defined
+
     return register_jitable(**_JIT_OPTIONS)(func)
 
 
 def kernel(func):
     """``func`` compiled with numba (cached, numpy error model); ``func`` stays as it is."""
+    from numba import njit
+
     return njit(**_JIT_OPTIONS)(func)
 
 
@@ -101,7 +103,8 @@ def install() -> None:
     if not _writable(path):
         return
     prune(path)
-    os.environ["NUMBA_CACHE_DIR"] = str(path)
-    import numba.core.config
+    os.environ["NUMBA_CACHE_DIR"] = str(path)   # numba reads it when it is imported
+    if "numba" in sys.modules:
+        import numba.core.config
 
-    numba.core.config.CACHE_DIR = str(path)
+        numba.core.config.CACHE_DIR = str(path)

@@ -15,13 +15,14 @@ import sys
 import threading
 from collections.abc import Sequence
 
-from threadpoolctl import threadpool_limits
-
-from companion.apps import commands as c
-from companion.apps.tune import SPACES
-from companion.control import CONTROLLERS
 from companion.errors import CompanionError
-from companion.params import SIDES
+
+# Choices spelled out so that --help and usage errors need no numpy, numba or scipy (they
+# answer in well under 0.2 s); tests/test_cli.py checks them against the registries
+# (companion.control.CONTROLLERS, companion.apps.tune.SPACES, companion.params.SIDES).
+CONTROLLERS = ("ic", "lqr", "lqr-paper", "lqr-tuned", "pid", "vsm")
+TUNABLE = ("ic", "lqr", "pid", "vsm")
+SIDES = ("behind", "front", "left", "right")
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -49,9 +50,9 @@ def parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="simulate one scenario and write log.csv, metrics.json")
     run.add_argument("scenario", help="built-in scenario name (see 'companion scenarios') "
                                       "or a TOML file")
-    run.add_argument("--controller", choices=sorted(CONTROLLERS),
+    run.add_argument("--controller", choices=CONTROLLERS,
                      help="controller (default: the scenario's)")
-    run.add_argument("--side", choices=sorted(SIDES), help="side of the person to walk on")
+    run.add_argument("--side", choices=SIDES, help="side of the person to walk on")
     run.add_argument("--bearing", metavar="RAD", help="desired bearing alpha_d in rad "
                      "(left pi/2, behind pi, right 3pi/2)")
     run.add_argument("--distance", metavar="M", help="desired distance rho_d in m")
@@ -69,27 +70,27 @@ def parser() -> argparse.ArgumentParser:
     run.add_argument("--plot", action="store_true", help="also write trajectory.png, "
                      "errors.png, inputs.png (and avoidance.png when there are obstacles)")
     _sensing(run)
-    run.set_defaults(func=c.cmd_run)
+    run.set_defaults(func="cmd_run")
 
     rp = sub.add_parser("reproduce", help="the paper's Fig. 3, Table 2, Fig. 4 and Fig. 7")
     rp.add_argument("--out", metavar="DIR", help="output folder (default out/reproduce)")
     _workers(rp)
-    rp.set_defaults(func=c.cmd_reproduce)
+    rp.set_defaults(func="cmd_reproduce")
 
     tn = sub.add_parser("tune", help="tune a controller's gains (docs/baselines.md)")
-    tn.add_argument("controller", choices=sorted(SPACES))
+    tn.add_argument("controller", choices=TUNABLE)
     tn.add_argument("--budget", type=int, default=64, help="candidates (default 64)")
     tn.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     tn.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
     _workers(tn)
     _sensing(tn)
-    tn.set_defaults(func=c.cmd_tune)
+    tn.set_defaults(func="cmd_tune")
 
     sc = sub.add_parser("scenarios", help="list the built-in scenarios")
-    sc.set_defaults(func=c.cmd_scenarios)
+    sc.set_defaults(func="cmd_scenarios")
 
     cv = sub.add_parser("convergence", help="Fig. 3: 48 starts, settling and safety table")
-    cv.add_argument("--controller", default="lqr", choices=sorted(CONTROLLERS))
+    cv.add_argument("--controller", default="lqr", choices=CONTROLLERS)
     cv.add_argument("--speeds", default="0.5,1.0", metavar="V1,V2",
                     help="person speeds in m/s (default 0.5,1.0)")
     cv.add_argument("--duration", default="30", metavar="S", help="simulated time per run")
@@ -100,14 +101,14 @@ def parser() -> argparse.ArgumentParser:
     cv.add_argument("--plot", action="store_true", help="write the Fig. 3 panels as PNG")
     _workers(cv)
     _sensing(cv)
-    cv.set_defaults(func=c.cmd_convergence)
+    cv.set_defaults(func="cmd_convergence")
 
     pd = sub.add_parser("pedestrians", help="our controller beside real walkers (ETH/UCY)")
     pd.add_argument("--data", metavar="DIR", help="folder of the ETH/UCY files (default: "
                     "../shared/data/pedestrians or $COMPANION_PEDESTRIANS)")
-    pd.add_argument("--controller", default="lqr", choices=sorted(CONTROLLERS) + ["all"],
+    pd.add_argument("--controller", default="lqr", choices=[*CONTROLLERS, "all"],
                     help="a controller, or all of them on the same runs (default lqr)")
-    pd.add_argument("--side", default="both", choices=sorted(SIDES) + ["both"],
+    pd.add_argument("--side", default="both", choices=[*SIDES, "both"],
                     help="side of the person (default: both, one run each)")
     pd.add_argument("--min-speed", type=float, default=0.6, metavar="MPS",
                     help="only tracks with a higher mean speed (default 0.6 m/s)")
@@ -117,19 +118,19 @@ def parser() -> argparse.ArgumentParser:
     pd.add_argument("--out", metavar="DIR", help="output folder (default out/pedestrians)")
     _workers(pd)
     _sensing(pd)
-    pd.set_defaults(func=c.cmd_pedestrians)
+    pd.set_defaults(func="cmd_pedestrians")
 
     sk = sub.add_parser("soak", help="long run of a random walker among obstacles "
                         "(docs/safety.md); exit 1 on a collision or a non-finite value")
     sk.add_argument("--duration", default="3600", metavar="S",
                     help="simulated time in s (default 3600)")
     sk.add_argument("--seed", type=int, default=0, help="world and walk seed (default 0)")
-    sk.add_argument("--controller", default="lqr", choices=sorted(CONTROLLERS))
+    sk.add_argument("--controller", default="lqr", choices=CONTROLLERS)
     sk.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
     sk.add_argument("--log", action="store_true", help="also write log.csv")
     sk.add_argument("--out", metavar="DIR", help="output folder (default out/soak)")
     _sensing(sk)
-    sk.set_defaults(func=c.cmd_soak)
+    sk.set_defaults(func="cmd_soak")
 
     bn = sub.add_parser("bench", help="step latency per controller alone and in the full "
                         "stack, full-stack throughput, first-step time and memory "
@@ -143,7 +144,7 @@ def parser() -> argparse.ArgumentParser:
                     help="skip the fresh-process first-step measurement (numba compile)")
     bn.add_argument("--out", metavar="FILE", help="also write the JSON figures to FILE")
     _workers(bn)
-    bn.set_defaults(func=c.cmd_bench)
+    bn.set_defaults(func="cmd_bench")
     return ap
 
 
@@ -161,9 +162,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     main_thread = threading.current_thread() is threading.main_thread()
     before = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
     try:
+        from threadpoolctl import threadpool_limits
+
+        from companion.apps import commands
+
         # The controller's matrices are 5x5: BLAS threads only cost hand-over time.
         with threadpool_limits(limits=1):
-            return args.func(args)
+            return getattr(commands, args.func)(args)
     except CompanionError as exc:
         print(f"companion: error: {exc}", file=sys.stderr)
         return 2
