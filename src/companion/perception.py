@@ -168,6 +168,34 @@ def _pieces(p: np.ndarray, max_segment: float) -> list[tuple[int, int]]:
     return list(zip(cuts[:-1], cuts[1:]))
 
 
+def checked_scan(scan: object, range_max: float = math.inf) -> Scan | None:
+    """``scan`` read the way a LaserScan driver means it, or None if it is not a valid scan.
+
+    Invalid: angles and ranges that are not 1-D arrays of numbers of the same length, an
+    angle or the sensor pose not finite. Per beam: above the sensor's ``range_max`` (or
+    ``range_max`` given here when the scan's is not finite; FLT_MAX and 1e20 included) is
+    ``inf``, "no return"; NaN or a finite range below ``range_min`` is NaN, an invalid beam;
+    ``-inf`` stays "closer than the sensor can measure" (ROS REP 117).
+    """
+    try:
+        angles = np.asarray(scan.angles, dtype=float)
+        ranges = np.array(scan.ranges, dtype=float)
+        pose = (float(scan.x), float(scan.y), float(scan.theta))
+        low = float(getattr(scan, "range_min", 0.0))
+        high = float(getattr(scan, "range_max", math.inf))
+    except (AttributeError, TypeError, ValueError):
+        return None
+    if angles.ndim != 1 or angles.shape != ranges.shape \
+            or not all(math.isfinite(v) for v in pose) or not np.all(np.isfinite(angles)):
+        return None
+    high = high if math.isfinite(high) else range_max
+    low = low if math.isfinite(low) and low >= 0.0 else 0.0
+    with np.errstate(invalid="ignore"):
+        ranges[ranges > high] = math.inf
+        ranges[np.isfinite(ranges) & (ranges < low)] = math.nan
+    return Scan(angles, ranges, *pose, low, high)
+
+
 def extract_obstacles(scan: Scan, person: tuple[float, float] | None,
                       params: ExtractorParams) -> list[Circle]:
     """Circular obstacles (world frame) that cover the returns of ``scan``.
@@ -175,7 +203,8 @@ def extract_obstacles(scan: Scan, person: tuple[float, float] | None,
     Parameters
     ----------
     scan : Scan
-        A LiDAR scan (:func:`companion.sim.lidar.cast` or hand-made); ``inf`` and NaN ranges
+        A LiDAR scan (:func:`companion.sim.lidar.cast` or hand-made), read by
+        :func:`checked_scan` (an invalid scan gives no obstacles); ``inf`` and NaN ranges
         count as "no return".
     person : (float, float) or None
         Tracked position of the person; circles centred near it are left out. ``None``
@@ -191,6 +220,10 @@ def extract_obstacles(scan: Scan, person: tuple[float, float] | None,
         split cluster (a wall, a large object) carry ``influence = piece_influence``: their
         radius says nothing about the object's size, so r / K_ob would be meaningless.
     """
+    checked = checked_scan(scan)
+    if checked is None:
+        return []
+    scan = checked
     pts, clusters = _clusters(scan, params.cluster_gap, params.breakpoint_angle)
     origin = np.array((scan.x, scan.y), float)
     heading = np.array((math.cos(scan.theta), math.sin(scan.theta)))

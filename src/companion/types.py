@@ -6,6 +6,7 @@ field says otherwise.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -110,7 +111,8 @@ class Scan:
 
     ``angles`` (rad, robot frame, increasing) and ``ranges`` (m) have one entry per beam;
     a range is ``inf`` where nothing was hit and NaN where the return is invalid
-    (as in ROS REP 117).
+    (as in ROS REP 117). ``range_min`` and ``range_max`` (m) are the sensor's limits, as in
+    sensor_msgs/LaserScan (``companion.perception.checked_scan`` reads a scan by them).
     """
 
     angles: np.ndarray
@@ -118,6 +120,8 @@ class Scan:
     x: float
     y: float
     theta: float
+    range_min: float = 0.0
+    range_max: float = math.inf
 
 
 @dataclass(frozen=True)

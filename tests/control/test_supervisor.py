@@ -9,12 +9,15 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from companion.control import AvoidingController, SafetySupervisor, make_controller
 from companion.control.checks import Clock
 from companion.control.limits import limit_rate
 from companion.geometry import unicycle_step
 from companion.params import Params
+from companion.perception import checked_scan, extract_obstacles
 from companion.sim.episode import run_episode
 from companion.sim.faults import Fault
 from companion.sim.person import Move, ScriptedWalk, line
@@ -384,6 +387,59 @@ def test_fault7_invalid_returns_are_not_free_space(ranges, status, reason):
     h = PersonState(0.25, 1.0, 0.0, 1.0, 0.0)
     cmd = sup.step(Observation(0.0, Pose(0.0, 0.0, 0.0), h, (), _scan(ranges)))
     assert cmd.status == status and reason in cmd.reason.split("+")
+
+
+ANGLES = np.linspace(-math.pi, math.pi, 360, endpoint=False)
+
+
+@pytest.mark.parametrize("scan", [
+    Scan(ANGLES, np.full(359, math.inf), 0.0, 0.0, 0.0),                  # lengths differ
+    Scan(ANGLES.reshape(2, 180), np.full((2, 180), math.inf), 0.0, 0.0, 0.0),   # not 1-D
+    Scan(np.where(ANGLES > 1.0, math.nan, ANGLES), np.full(360, math.inf), 0.0, 0.0, 0.0),
+    Scan(ANGLES, np.full(360, math.inf), math.nan, 0.0, 0.0),             # pose unknown
+    Scan(ANGLES, None, 0.0, 0.0, 0.0),
+    Scan(ANGLES, ["far"] * 360, 0.0, 0.0, 0.0),
+])
+def test_fault7_a_malformed_scan_stops_the_robot_and_never_raises(scan):
+    sup = make_controller("lqr", P)
+    sup.reset()
+    h = PersonState(0.25, 1.0, 0.0, 1.0, 0.0)
+    cmd = sup.step(Observation(0.0, Pose(0.0, 0.0, 0.0), h, (), scan))
+    assert cmd.status == "stopped" and cmd.reason.split("+")[0] == "scan_invalid"
+
+
+def test_fault7_ranges_as_drivers_send_them():
+    """FLT_MAX, 1e20 and anything above range_max mean "no return"; a range below range_min
+    is an invalid beam; a list of ranges is read like an array."""
+    flt_max = float(np.finfo(np.float32).max)
+    ranges = [flt_max] * 100 + [1e20] * 100 + [50.0] * 100 + [0.01] * 60
+    scan = Scan(list(ANGLES), ranges, 0.0, 0.0, 0.0, range_min=0.05, range_max=30.0)
+    checked = checked_scan(scan)
+    assert np.all(np.isposinf(checked.ranges[:300])) and np.all(np.isnan(checked.ranges[300:]))
+    assert extract_obstacles(scan, None, P.extractor) == []
+    sup = make_controller("lqr", P)
+    sup.reset()
+    cmd = sup.step(Observation(0.0, Pose(0.0, 0.0, 0.0), PersonState(0.25, 1.0, 0.0, 1.0, 0.0),
+                               (), scan))
+    assert cmd.status == "degraded" and "scan_partial" in cmd.reason.split("+")
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True),
+                          st.sampled_from([1e20, -1e20, 3.4028234663852886e38])),
+                min_size=0, max_size=40),
+       st.integers(-2, 2),
+       st.tuples(*[st.floats(allow_nan=True, allow_infinity=True)] * 3))
+def test_any_scan_gives_a_finite_command_within_limits(ranges, extra, pose):
+    angles = np.linspace(-math.pi, math.pi, max(len(ranges) + extra, 0), endpoint=False)
+    sup = make_controller("lqr", P)
+    sup.reset()
+    h = PersonState(0.0, 1.0, 0.0, 1.0, 0.0)
+    scan = Scan(angles, ranges, *pose)
+    for k in range(3):
+        cmd = sup.step(Observation(k * DT, Pose(0.0, 0.0, 0.0), h, (), scan))
+        assert math.isfinite(cmd.v) and math.isfinite(cmd.omega)
+        assert abs(cmd.v) <= P.robot.v_max and abs(cmd.omega) <= P.robot.omega_max
 
 
 def test_fault7_scan_blackout_in_closed_loop_with_lidar():

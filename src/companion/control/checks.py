@@ -49,7 +49,8 @@ def too_close(scan: Scan, radius: float) -> bool:
 
 
 def scan_fault(scan: Scan, params: Params, reasons: list[str]) -> str:
-    """The stop reason a scan gives ("" if none); "scan_partial" goes to ``reasons``."""
+    """The stop reason a scan (read by :func:`companion.perception.checked_scan`) gives ("" if
+    none); "scan_partial" goes to ``reasons``."""
     fraction = valid_fraction(scan)
     if fraction < params.supervisor.min_valid_returns or fraction == 0.0:
         return "scan_invalid"

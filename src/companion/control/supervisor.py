@@ -30,8 +30,9 @@ from companion.control.limits import limit
 from companion.control.slot import reference_point, slot_point
 from companion.geometry import unicycle_step, wrap_pi
 from companion.params import Params
+from companion.perception import checked_scan
 from companion.tracking import PersonTracker, exact_detection, predict
-from companion.types import Command, Observation, PersonDetection, PersonEstimate, Pose
+from companion.types import Command, Observation, PersonDetection, PersonEstimate, Pose, Scan
 
 OK, DEGRADED, STOPPED = "ok", "degraded", "stopped"
 
@@ -86,8 +87,9 @@ class SafetySupervisor:
             reasons.append("obstacle_invalid")
         if not stop and checks.obstacle_inside(obs.robot, obstacles, p.robot.radius):
             stop = "obstacle_in_footprint"
+        scan = None if obs.scan is None else checked_scan(obs.scan, p.lidar.range_max)
         if not stop and obs.scan is not None:
-            stop = checks.scan_fault(obs.scan, p, reasons)
+            stop = "scan_invalid" if scan is None else checks.scan_fault(scan, p, reasons)
         velocity = self._velocity(obs)
         if not self._started:         # the rate limits start from the measured velocity
             self._prev, self._started = self._limited(velocity), True
@@ -98,7 +100,7 @@ class SafetySupervisor:
             if self._inner_fresh:
                 self.inner.reset()
                 self._inner_fresh = False
-            cmd = self.inner.step(self._ahead(obs, estimate, obstacles, velocity))
+            cmd = self.inner.step(self._ahead(obs, estimate, obstacles, scan, velocity))
             if checks.finite(cmd.v, cmd.omega, cmd.u_ob):
                 stepped, target = True, (cmd.v, cmd.omega, cmd.u_ob)
             else:
@@ -159,8 +161,8 @@ class SafetySupervisor:
         v = obs.robot_velocity
         return v if v is not None and checks.finite(*v) else self._prev
 
-    def _ahead(self, obs: Observation, estimate: PersonEstimate,
-               obstacles: tuple, velocity: tuple[float, float]) -> Observation:
+    def _ahead(self, obs: Observation, estimate: PersonEstimate, obstacles: tuple,
+               scan: Scan | None, velocity: tuple[float, float]) -> Observation:
         """What the controller gets: robot and person predicted ``actuator_tau_s`` on, the
         moment a command sent now mostly takes effect."""
         tau = self.params.sensing.actuator_tau_s
@@ -168,7 +170,7 @@ class SafetySupervisor:
         if tau > 0.0:
             x, y, th = unicycle_step(robot.x, robot.y, robot.theta, *velocity, tau)
             robot, person = Pose(x, y, wrap_pi(th)), predict(person, tau)
-        return Observation(self._clock.now, robot, person, obstacles, obs.scan, velocity)
+        return Observation(self._clock.now, robot, person, obstacles, scan, velocity)
 
     def _check_slot(self, robot: Pose, estimate: PersonEstimate, reasons: list[str]) -> None:
         """Report a slot error above ``slot_error_m`` that lasts ``slot_error_time_s``."""

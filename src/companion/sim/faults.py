@@ -31,7 +31,7 @@ import numpy as np
 
 from companion.config import Validated, build, non_negative, param, positive
 from companion.errors import ConfigError
-from companion.types import Circle, Observation, Pose, Scan
+from companion.types import Circle, Observation, Pose
 
 KINDS = ("person_dropout", "person_nan", "person_jump", "robot_nan", "obstacle_nan",
          "scan_blackout", "clock_freeze", "clock_backward", "stall")
@@ -110,8 +110,7 @@ def apply(obs: Observation, faults: Sequence[Fault]) -> Observation:
         elif f.kind == "obstacle_nan":
             obs = dataclasses.replace(obs, obstacles=(*obs.obstacles, Circle(_NAN, _NAN, 0.3)))
         elif f.kind == "scan_blackout" and obs.scan is not None:
-            s = obs.scan
-            dark = Scan(s.angles, np.full_like(s.ranges, np.nan), s.x, s.y, s.theta)
+            dark = dataclasses.replace(obs.scan, ranges=np.full_like(obs.scan.ranges, np.nan))
             obs = dataclasses.replace(obs, scan=dark, obstacles=())
         elif f.kind == "clock_freeze":
             obs = dataclasses.replace(obs, t=f.start)

@@ -154,7 +154,8 @@ def cast(pose: Pose, circles: Sequence[Circle], walls: Sequence[Wall],
         hit = np.isfinite(ranges)
         ranges[hit] = np.maximum(ranges[hit] + rng.normal(0.0, params.noise_std, int(hit.sum())),
                                  0.0)
-    return Scan(angles=angles.copy(), ranges=ranges, x=ox, y=oy, theta=th)
+    return Scan(angles=angles.copy(), ranges=ranges, x=ox, y=oy, theta=th,
+                range_max=params.range_max)
 
 
 def scan_points(scan: Scan) -> np.ndarray:
