@@ -39,6 +39,11 @@ def param(default: Any, unit: str, doc: str, check: Check | None = None,
     return dataclasses.field(default=default, metadata=meta)
 
 
+#: Largest magnitude of any number in a configuration (m, s, rad, weights): beyond it a value
+#: is a typo or an attack, and arithmetic on it overflows. A field that accepts ``inf`` says so.
+MAX_MAGNITUDE = 1e6
+
+
 def positive(x: float) -> str | None:
     return None if 0.0 < x < math.inf else "a finite positive number"
 
@@ -49,6 +54,9 @@ def non_negative(x: float) -> str | None:
 
 def positive_or_inf(x: float) -> str | None:
     return None if x > 0.0 else "a positive number (inf allowed)"
+
+
+positive_or_inf.allows_inf = True  # type: ignore[attr-defined]
 
 
 def fraction(x: float) -> str | None:
@@ -71,6 +79,23 @@ def all_positive_or_inf(xs: tuple[float, ...]) -> str | None:
     return None if all(x > 0.0 for x in xs) else "all entries positive (inf allowed)"
 
 
+all_positive_or_inf.allows_inf = True  # type: ignore[attr-defined]
+
+
+def at_least(low: float, unit: str) -> Check:
+    """A check: a finite number >= ``low`` (what a simulation can resolve)."""
+    def check(x: float) -> str | None:
+        return None if low <= x < math.inf else f"a number >= {low:g} {unit}"
+    return check
+
+
+def between(low: float, high: float, unit: str) -> Check:
+    """A check: a number in [``low``, ``high``]."""
+    def check(x: float) -> str | None:
+        return None if low <= x <= high else f"a number in [{low:g}, {high:g}] {unit}"
+    return check
+
+
 def hint(key: str, known: typing.Iterable[str]) -> str:
     """A "; did you mean 'x'?" suffix for a misspelt key, or an empty string."""
     close = difflib.get_close_matches(key, list(known), n=1, cutoff=0.6)
@@ -86,20 +111,25 @@ def reject_unknown(mapping: Mapping[str, Any], known: typing.Iterable[str], wher
                               f"(known: {', '.join(known)})")
 
 
-def _as_float(value: Any, name: str) -> float:
+def _as_float(value: Any, name: str, allow_inf: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ConfigError(f"{name}: expected a number, got {value!r}")
     x = float(value)
     if math.isnan(x):
         raise ConfigError(f"{name}: expected a number, got nan")
+    if abs(x) > MAX_MAGNITUDE and not (allow_inf and math.isinf(x)):
+        raise ConfigError(f"{name}: expected a finite number of magnitude at most "
+                          f"{MAX_MAGNITUDE:g}{' (or inf)' if allow_inf else ''}, got {value!r}")
     return x
 
 
-def convert(value: Any, tp: Any, name: str) -> Any:
-    """Convert a TOML value to the annotated type ``tp`` or raise naming ``name``."""
+def convert(value: Any, tp: Any, name: str, allow_inf: bool = False) -> Any:
+    """Convert a TOML value to the annotated type ``tp`` or raise naming ``name``. Numbers
+    must be finite and at most :data:`MAX_MAGNITUDE` in magnitude (``inf`` where
+    ``allow_inf``)."""
     origin = typing.get_origin(tp)
     if tp is float:
-        return _as_float(value, name)
+        return _as_float(value, name, allow_inf)
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ConfigError(f"{name}: expected an integer, got {value!r}")
@@ -117,20 +147,26 @@ def convert(value: Any, tp: Any, name: str) -> Any:
         if not isinstance(value, (list, tuple)):
             raise ConfigError(f"{name}: expected a list, got {value!r}")
         if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(convert(v, args[0], f"{name}[{i}]") for i, v in enumerate(value))
+            return tuple(convert(v, args[0], f"{name}[{i}]", allow_inf)
+                         for i, v in enumerate(value))
         if len(value) != len(args):
             raise ConfigError(f"{name}: expected {len(args)} values, got {len(value)}")
-        return tuple(convert(v, a, f"{name}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
+        return tuple(convert(v, a, f"{name}[{i}]", allow_inf)
+                     for i, (v, a) in enumerate(zip(value, args)))
     if origin in (typing.Union, types.UnionType):
         args = [a for a in typing.get_args(tp) if a is not type(None)]
         if value is None:
             return None
-        return convert(value, args[0], name)
+        return convert(value, args[0], name, allow_inf)
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, Mapping):
             raise ConfigError(f"{name}: expected a table, got {value!r}")
         return build(tp, value, prefix=f"{name}.")
     raise TypeError(f"convert: unsupported field type {tp!r} for {name}")  # programming error
+
+
+def _allows_inf(f: dataclasses.Field) -> bool:
+    return getattr(f.metadata.get("check"), "allows_inf", False)
 
 
 def _check_field(f: dataclasses.Field, value: Any, name: str) -> None:
@@ -159,7 +195,7 @@ def build(cls: type[T], mapping: Mapping[str, Any], prefix: str = "") -> T:
     for key, value in mapping.items():
         f = fields[key]
         name = f"{prefix}{key}"
-        converted = convert(value, hints[key], name)
+        converted = convert(value, hints[key], name, _allows_inf(f))
         _check_field(f, converted, name)
         kwargs[key] = converted
     try:
@@ -177,7 +213,8 @@ def validate(obj: Any, prefix: str = "") -> None:
         if dataclasses.is_dataclass(value):
             validate(value, prefix=f"{name}.")
             continue
-        convert(list(value) if isinstance(value, tuple) else value, hints[f.name], name)
+        convert(list(value) if isinstance(value, tuple) else value, hints[f.name], name,
+                _allows_inf(f))
         _check_field(f, value, name)
 
 

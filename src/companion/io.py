@@ -7,7 +7,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-import math
 import os
 import shutil
 import tempfile
@@ -16,6 +15,9 @@ from pathlib import Path
 from typing import Any
 
 from companion.errors import DataError
+
+#: Largest magnitude of a number in a data file (m, s): beyond it a cell is corrupt.
+MAX_CELL = 1e6
 
 
 def parse_number(where: str, col: str, cell: str) -> float:
@@ -26,8 +28,9 @@ def parse_number(where: str, col: str, cell: str) -> float:
         value = float(text)
     except ValueError:
         raise DataError(f"{where}: column '{col}': expected a number, got {text!r}") from None
-    if not math.isfinite(value):
-        raise DataError(f"{where}: column '{col}': expected a finite number, got {text!r}")
+    if not abs(value) <= MAX_CELL:
+        raise DataError(f"{where}: column '{col}': expected a finite number of magnitude at "
+                        f"most {MAX_CELL:g}, got {text!r}")
     return value
 
 

@@ -9,10 +9,9 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import math
 import os
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -21,8 +20,8 @@ from tqdm import tqdm
 from companion import metrics
 from companion.apps import benchmark, plots, reproduce, table3, tune
 from companion.apps import pedestrians as walkers
-from companion.config import load_toml
-from companion.control import CONTROLLERS, lookup
+from companion.config import MAX_MAGNITUDE, load_toml
+from companion.control import CONTROLLERS, lookup, make_controller
 from companion.data import pedestrians
 from companion.errors import CompanionError
 from companion.geometry import wrap_2pi
@@ -31,7 +30,13 @@ from companion.params import Params, load_sensing, params_from_mapping
 from companion.sim import convergence, soak
 from companion.sim.recorded import load_person_csv
 from companion.sim.runner import run_many
-from companion.sim.scenario import Scenario, builtin_names, load_scenario, run_scenario
+from companion.sim.scenario import (
+    MAX_DURATION,
+    Scenario,
+    builtin_names,
+    load_scenario,
+    run_scenario,
+)
 from companion.types import LOG_COLUMNS, TEXT_COLUMNS, Log, Pose
 
 
@@ -44,9 +49,12 @@ def _floats(text: str, n: int, what: str) -> tuple[float, ...]:
     try:
         values = tuple(float(p) for p in parts)
     except ValueError:
-        raise UsageError(f"{what}: expected {n} comma-separated numbers, got {text!r}") from None
-    if len(values) != n or not all(math.isfinite(v) for v in values):
-        raise UsageError(f"{what}: expected {n} comma-separated finite numbers, got {text!r}")
+        count = "a number" if n == 1 else f"{n} comma-separated numbers"
+        raise UsageError(f"{what}: expected {count}, got {text!r}") from None
+    if len(values) != n or not all(abs(v) <= MAX_MAGNITUDE for v in values):
+        count = "a finite number" if n == 1 else f"{n} comma-separated finite numbers"
+        raise UsageError(f"{what}: expected {count} of magnitude at most {MAX_MAGNITUDE:g}, "
+                         f"got {text!r}")
     return values
 
 
@@ -55,6 +63,30 @@ def _positive(text: str, what: str) -> float:
     if value <= 0:
         raise UsageError(f"{what}: expected a positive number, got {text!r}")
     return value
+
+
+def _duration(text: str, what: str = "--duration") -> float:
+    """A simulated duration in (0, MAX_DURATION] s."""
+    value = _positive(text, what)
+    if value > MAX_DURATION:
+        raise UsageError(f"{what}: expected at most {MAX_DURATION:g} s (a day), got {text!r}")
+    return value
+
+
+def _seed(seed: int) -> int:
+    if seed < 0:
+        raise UsageError(f"--seed: expected an integer >= 0, got {seed}")
+    return seed
+
+
+def checked_controllers(names: Sequence[str], params: Params, where: str | None) -> None:
+    """Build each controller once, so that weights without a stabilising gain are a one-line
+    error naming the file ``where`` they came from, before any work."""
+    for name in names:
+        try:
+            make_controller(name, params)
+        except CompanionError as exc:
+            raise UsageError(f"{where}: {exc}" if where else str(exc)) from None
 
 
 def params_arg(args: argparse.Namespace) -> Params:
@@ -103,7 +135,7 @@ def build_scenario(args: argparse.Namespace) -> Scenario:
         changes["person"] = person
         changes["duration"] = person.duration
     if args.duration:
-        changes["duration"] = _positive(args.duration, "--duration")
+        changes["duration"] = _duration(args.duration)
     if args.obstacles:
         changes["obstacle_source"] = args.obstacles
     changes["params"] = with_sensing(sc.params, args)
@@ -192,6 +224,7 @@ def _write_run(out: Path, sc, plot: bool, log: Log, m: dict) -> list[str]:
 def cmd_run(args: argparse.Namespace) -> int:
     sc = build_scenario(args)
     lookup(sc.controller)  # unknown names: ConfigError with a hint
+    checked_controllers([sc.controller], sc.params, args.params or sc.source)
     out = output_dir(Path(args.out or Path("out") / sc.name))
     log = run_scenario(sc)
     m = metrics.compute(log)
@@ -218,10 +251,11 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
 
 def cmd_convergence(args: argparse.Namespace) -> int:
     params = params_arg(args)
+    checked_controllers([args.controller], params, args.params)
     speeds = _floats(args.speeds, len(args.speeds.split(",")), "--speeds")
     if any(v < 0 for v in speeds):
         raise UsageError(f"--speeds: expected speeds >= 0 m/s, got {args.speeds!r}")
-    duration = _positive(args.duration, "--duration")
+    duration = _duration(args.duration)
     out = output_dir(Path(args.out or Path("out") / "convergence"))
     cases = list(convergence.cases(speeds))
     logs = run_many([convergence.episode(c, args.controller, params, duration) for c in cases],
@@ -261,6 +295,7 @@ def cmd_convergence(args: argparse.Namespace) -> int:
 def cmd_pedestrians(args: argparse.Namespace) -> int:
     params = params_arg(args)
     controllers = list(CONTROLLERS) if args.controller == "all" else [args.controller]
+    checked_controllers(controllers, params, args.params)
     sides = ("left", "right") if args.side == "both" else (args.side,)
     tracks = pedestrians.select_tracks(pedestrians.load_scenes(args.data),
                                        min_mean_speed=args.min_speed,
@@ -300,11 +335,12 @@ def walkers_text(table: dict, paired: dict) -> str:
 
 def cmd_soak(args: argparse.Namespace) -> int:
     params = params_arg(args)
-    duration = _positive(args.duration, "--duration")
+    checked_controllers([args.controller], params, args.params)
+    duration = _duration(args.duration)
     out = output_dir(Path(args.out or Path("out") / "soak"))
     print(f"soak: {duration:g} s of a random walker among pillars (seed {args.seed}), "
           f"controller {args.controller}; about {duration / 25:.0f} s")
-    summary, log = soak.run_soak(duration, args.seed, args.controller, params)
+    summary, log = soak.run_soak(duration, _seed(args.seed), args.controller, params)
     with Outputs(out, "soak") as stage:
         write_json(stage / "soak.json", summary)
         written = ["soak.json"]
@@ -344,13 +380,14 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
 def cmd_tune(args: argparse.Namespace) -> int:
     params = params_arg(args)
+    checked_controllers([args.controller], params, args.params)
     if args.budget < 1:
         raise UsageError(f"--budget: expected a whole number >= 1, got {args.budget}")
     print(f"tuning {args.controller}: {args.budget} candidates, seed {args.seed}, "
           f"scenarios {', '.join(c.name for c in tune.tuning_scenarios())}")
     cases = len(tune.tuning_scenarios())
     with progress_bar(args.budget * cases, "episode") as progress:
-        result = tune.tune(args.controller, params, args.budget, args.seed,
+        result = tune.tune(args.controller, params, args.budget, _seed(args.seed),
                            workers_arg(args), progress)
     print(f"J: current gains {result.start_score:.4f}, best {result.best_score:.4f}")
     for dim, value in zip(result.dims, result.best):
@@ -361,7 +398,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     if args.episodes < 1:
         raise UsageError(f"--episodes: expected a whole number >= 1, got {args.episodes}")
-    duration = _positive(args.duration, "--duration")
+    duration = _duration(args.duration)
     result = benchmark.run(args.episodes, duration, workers_arg(args), not args.no_first_step,
                            progress=lambda msg: print(f"bench: {msg}", file=sys.stderr))
     if args.out:

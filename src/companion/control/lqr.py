@@ -23,6 +23,7 @@ import numpy as np
 
 from companion._jit import jitable, kernel
 from companion.control.base import saturate
+from companion.errors import ConfigError
 from companion.geometry import wrap_pi
 from companion.model import discretize, euler, jacobians, relative_state, slot_reference
 from companion.params import Params
@@ -86,7 +87,13 @@ class LqrController:
         self._r = np.array(params.lqr.r, dtype=float)
         # For operating points without a stabilising gain (robot and person at rest: the
         # heading mode is then uncontrollable in the linearisation) before any gain is known.
-        self._rest_gain = self.gain(*rest_operating_point(params))
+        # Solving once here also checks the weights: none that fail reach a step.
+        try:
+            self._rest_gain = self.gain(*rest_operating_point(params))
+        except np.linalg.LinAlgError:
+            raise ConfigError(f"lqr.q, lqr.r: no stabilising LQR gain for the slot with "
+                              f"q = {params.lqr.q}, r = {params.lqr.r} (every weight of q "
+                              f"> 0 gives one)") from None
         self.reset()
 
     def reset(self) -> None:

@@ -52,11 +52,12 @@ from pathlib import Path
 from typing import Any
 
 from companion.config import (
+    at_least,
+    between,
     build,
     convert,
     hint,
     load_toml,
-    non_negative,
     param,
     positive,
     reject_unknown,
@@ -73,40 +74,47 @@ from companion.types import Circle, Log, Obstacle, Pose, Wall
 
 Triple = tuple[float, float, float]
 
+#: What a walking (or jogging) person can do: speeds in m/s.
+SPEED = between(0.0, 3.0, "m/s")
+WALKING = between(0.01, 3.0, "m/s")
+#: The longest simulated episode (s): a day (its log is about 400 MB).
+MAX_DURATION = 86400.0
+
 
 @dataclass(frozen=True)
 class LineSpec:
     start: Triple = param((0.0, 0.0, 0.0), "m, m, rad", "start pose x, y, heading")
-    speed: float = param(1.0, "m/s", "walking speed", positive)
+    speed: float = param(1.0, "m/s", "walking speed", WALKING)
 
 
 @dataclass(frozen=True)
 class CircleSpec:
     start: Triple = param((0.0, 0.0, 0.0), "m, m, rad", "start pose x, y, heading")
-    radius: float = param(3.0, "m", "circle radius", positive)
-    speed: float = param(1.0, "m/s", "walking speed", positive)
+    radius: float = param(3.0, "m", "circle radius", at_least(0.2, "m"))
+    speed: float = param(1.0, "m/s", "walking speed", WALKING)
     turn: str = param("left", "-", "turn direction", choices=("left", "right"))
 
 
 @dataclass(frozen=True)
 class Figure8Spec:
-    lap_time: float = param(60.0, "s", "time for one lap of Eq. (23)", positive)
+    lap_time: float = param(60.0, "s", "time for one lap of Eq. (23)", at_least(5.0, "s"))
     phase: float = param(0.0, "rad", "phase of Eq. (23) at t = 0 (0: at (5, 3) walking +x)")
 
 
 @dataclass(frozen=True)
 class UShapeSpec:
     start: Triple = param((0.0, 0.0, 0.0), "m, m, rad", "start pose x, y, heading")
-    radius: float = param(2.0, "m", "radius of the half circle", positive)
+    radius: float = param(2.0, "m", "radius of the half circle", at_least(0.2, "m"))
     turn: str = param("left", "-", "turn direction", choices=("left", "right"))
 
 
 @dataclass(frozen=True)
 class SegmentSpec:
     duration: float = param(1.0, "s", "segment duration", positive)
-    v_start: float = param(1.0, "m/s", "speed at the segment start", non_negative)
-    v_end: float = param(1.0, "m/s", "speed at the segment end", non_negative)
-    curvature: float = param(0.0, "1/m", "signed curvature, positive turns left")
+    v_start: float = param(1.0, "m/s", "speed at the segment start", SPEED)
+    v_end: float = param(1.0, "m/s", "speed at the segment end", SPEED)
+    curvature: float = param(0.0, "1/m", "signed curvature, positive turns left",
+                             between(-10.0, 10.0, "1/m"))
 
 
 @dataclass(frozen=True)
@@ -271,9 +279,9 @@ def scenario_from_mapping(data: Mapping[str, Any], source: str, base_dir: Path,
         raise ConfigError(f"{where}description: expected a string")
     duration = data.get("duration", 60.0)
     if isinstance(duration, bool) or not isinstance(duration, (int, float)) \
-            or not 0.0 < duration < math.inf:
-        raise ConfigError(f"{where}duration: expected a positive number of seconds, "
-                          f"got {duration!r}")
+            or not 0.0 < duration <= MAX_DURATION:
+        raise ConfigError(f"{where}duration: expected a number of seconds in (0, "
+                          f"{MAX_DURATION:g}], got {duration!r}")
     seed = data.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ConfigError(f"{where}seed: expected an integer >= 0, got {seed!r}")
