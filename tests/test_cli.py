@@ -102,6 +102,8 @@ def test_run_with_obstacles_writes_avoidance_metrics_and_panel(tmp_path, capsys)
     (["run", "line", "--duration", "1e5"], "--duration: expected at most 86400 s"),
     (["run", "line", "--start=1e308,0,0"], "--start: expected 3 comma-separated finite numbers"),
     (["run", "line", "--distance", "inf"], "--distance: expected a finite number"),
+    (["run", "line", "--distance", "0.3"], "error: --distance: params.formation.distance: the "
+                                           "slot at 0.3 m"),
     (["soak", "--seed", "-1", "--duration", "1"], "--seed: expected an integer >= 0, got -1"),
     (["soak", "--duration", "1e308"], "--duration: expected a finite number of magnitude"),
     (["run", "line", "--side", "left", "--bearing", "1"], "give one, not both"),
@@ -151,6 +153,8 @@ def test_bad_usage_exits_2_with_one_line(argv, message, capsys, tmp_path):
      "person.speed: expected a number in [0.01, 3] m/s"),
     ('[person]\nkind = "segments"\n[[person.segments]]\ncurvature = inf\n',
      "person.segments[0].curvature: expected a finite number"),
+    ('controller = "lqrr"\n[person]\nkind = "line"\n',
+     "bad.toml: controller: unknown controller 'lqrr'; did you mean 'lqr'"),
     ('duration = 1e9\n[person]\nkind = "line"\n',
      "duration: expected a number of seconds in (0, 86400]"),
 ])

@@ -217,3 +217,12 @@ def test_an_uncertain_track_is_reported():
     tr.add([seen(0.0, 0.0, 0.0)], 0.0)
     assert tr.estimate(0.0, reasons).position_std == pytest.approx(0.1, rel=1e-3)
     assert reasons == ["person_uncertain"]
+
+
+def test_a_clock_that_goes_back_past_the_track_loses_the_person_instead_of_raising():
+    tr = PersonTracker(TP)
+    tr.add([exact_detection(1e308, PersonState(0.0, 0.0, 0.0, 0.0, 3.0))], 1e308)
+    assert tr.estimate(1e308) is not None
+    assert tr.estimate(1.0) is None and tr.lost
+    walk(tr, np.arange(2.0, 3.0, 0.1), straight)          # a new track can start again
+    assert tr.estimate(2.9) is not None and not tr.lost

@@ -513,3 +513,15 @@ def test_rate_limits_start_from_the_measured_velocity():
     h = PersonState(0.0, 1.0, 0.0, 1.0, 0.0)
     cmd = sup.step(Observation(0.0, Pose(-0.25, 0.0, 0.0), h, robot_velocity=(1.0, 0.0)))
     assert abs(cmd.v - 1.0) <= S.accel_max * DT + EPS
+
+
+@pytest.mark.parametrize("name", ["lqr", "pid", "vsm", "ic"])
+def test_fault2_an_absurd_robot_pose_stops_the_robot(name):
+    """A finite but absurd pose (1e300 m) is as invalid as NaN: no controller sees it."""
+    sup = make_controller(name, P)
+    sup.reset()
+    h = PersonState(0.0, 1.0, 0.0, 1.0, 0.0)
+    for k in range(40):
+        cmd = sup.step(Observation(k * DT, Pose(1e300, 0.0, 0.0), h))
+        assert cmd.status == "stopped" and cmd.reason.startswith("robot_pose_invalid")
+    assert cmd.v == 0.0 and cmd.omega == 0.0

@@ -23,7 +23,7 @@ from companion.apps import pedestrians as walkers
 from companion.config import MAX_MAGNITUDE, load_toml
 from companion.control import CONTROLLERS, lookup, make_controller
 from companion.data import pedestrians
-from companion.errors import CompanionError
+from companion.errors import CompanionError, ConfigError
 from companion.geometry import wrap_2pi
 from companion.io import Outputs, save_figure, write_csv, write_json
 from companion.params import Params, load_sensing, params_from_mapping
@@ -124,7 +124,17 @@ def _overrides(args: argparse.Namespace) -> dict:
 
 
 def build_scenario(args: argparse.Namespace) -> Scenario:
-    sc = load_scenario(args.scenario, params_override=_overrides(args))
+    sc = load_scenario(args.scenario)           # the file's own errors name the file
+    over = _overrides(args)
+    if over:
+        try:
+            sc = load_scenario(args.scenario, params_override=over)
+        except ConfigError as exc:              # the flags' errors name the flags
+            given = [f"--params {args.params}" if args.params else "",
+                     "--side" if args.side else "", "--bearing" if args.bearing else "",
+                     "--distance" if args.distance else ""]
+            detail = str(exc).split(": ", 1)[-1]
+            raise UsageError(f"{', '.join(g for g in given if g)}: {detail}") from None
     changes: dict = {}
     if args.controller:
         changes["controller"] = args.controller

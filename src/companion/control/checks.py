@@ -17,8 +17,15 @@ def finite(*values: float) -> bool:
     return all(math.isfinite(x) for x in values)
 
 
+#: Largest plausible robot coordinate (m): beyond it a pose is corrupt, and the geometry of
+#: a person 1 m away would lose every digit.
+MAX_COORDINATE = 1e6
+
+
 def pose_is_finite(pose: Pose) -> bool:
-    return finite(pose.x, pose.y, pose.theta)
+    """Finite, with coordinates a robot could have (at most :data:`MAX_COORDINATE`)."""
+    return (finite(pose.x, pose.y, pose.theta) and abs(pose.x) <= MAX_COORDINATE
+            and abs(pose.y) <= MAX_COORDINATE)
 
 
 def obstacle_is_finite(ob: Obstacle) -> bool:

@@ -62,6 +62,7 @@ from companion.config import (
     positive,
     reject_unknown,
 )
+from companion.control import lookup
 from companion.errors import ConfigError
 from companion.model import relative_state
 from companion.params import LEFT, RIGHT, Params, params_from_mapping, sensing_params
@@ -288,6 +289,10 @@ def scenario_from_mapping(data: Mapping[str, Any], source: str, base_dir: Path,
     controller = data.get("controller", "lqr")
     if not isinstance(controller, str):
         raise ConfigError(f"{where}controller: expected a controller name")
+    try:
+        lookup(controller)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}{exc}") from None
     if "person" not in data:
         raise ConfigError(f"{where}person: missing table [person]")
     person = person_from_mapping(data["person"], where, base_dir)

@@ -210,6 +210,10 @@ class PersonTracker:
             return None
         last = self._history[-1]
         age = now - last.t
+        if age < -p.future_tolerance_s:       # the clock went back past the track: start over
+            self.reset()
+            self.lost = True
+            return None
         if age > p.lost_after_s:
             self.lost, self._candidate = True, []
             return None
