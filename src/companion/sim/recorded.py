@@ -205,11 +205,29 @@ def hold_heading(theta: np.ndarray, moving: np.ndarray) -> np.ndarray:
     return theta[idx]
 
 
+#: Samples closer together than the smoothing time constant over this are averaged before
+#: smoothing (:func:`binned`): the spline's cost grows with the samples, not its result.
+BIN_FRACTION = 25.0
+
+
+def binned(t: np.ndarray, x: np.ndarray, y: np.ndarray, width: float
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The samples averaged over consecutive bins ``width`` s wide, when they are denser than
+    that (a 1 kHz recording); sparser tracks are returned as they are."""
+    if width <= 0.0 or len(t) < 3 or float(np.median(np.diff(t))) >= width:
+        return t, x, y
+    _, which = np.unique(np.floor(t / width).astype(np.int64), return_inverse=True)
+    count = np.bincount(which)
+    return (np.bincount(which, t) / count, np.bincount(which, x) / count,
+            np.bincount(which, y) / count)
+
+
 def _tabulate(t: np.ndarray, x: np.ndarray, y: np.ndarray, smoothing: float,
               standing_speed: float, grid_step: float) -> dict[str, np.ndarray]:
     """Smoothed position, heading (unwrapped), speed and turn rate on a grid over [0, t[-1]]."""
     n = max(int(math.ceil(t[-1] / grid_step)), 1) + 1
     tg = np.linspace(0.0, t[-1], n)
+    t, x, y = binned(t, x, y, smoothing / BIN_FRACTION)
     sx, sy = smooth(t, x, smoothing), smooth(t, y, smoothing)
     dx, dy = sx.derivative(1)(tg), sy.derivative(1)(tg)
     ddx, ddy = sx.derivative(2)(tg), sy.derivative(2)(tg)
