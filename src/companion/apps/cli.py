@@ -72,7 +72,8 @@ def parser() -> argparse.ArgumentParser:
     _sensing(run)
     run.set_defaults(func="cmd_run")
 
-    rp = sub.add_parser("reproduce", help="the paper's Fig. 3, Table 2, Fig. 4 and Fig. 7")
+    rp = sub.add_parser("reproduce", help="the paper's Fig. 3, Table 2, Fig. 4, Fig. 7 and Table 3 "
+                        "(realistic sensing)")
     rp.add_argument("--out", metavar="DIR", help="output folder (default out/reproduce)")
     _workers(rp)
     rp.set_defaults(func="cmd_reproduce")
@@ -103,7 +104,8 @@ def parser() -> argparse.ArgumentParser:
     _sensing(cv)
     cv.set_defaults(func="cmd_convergence")
 
-    pd = sub.add_parser("pedestrians", help="our controller beside real walkers (ETH/UCY)")
+    pd = sub.add_parser("pedestrians", help="every controller beside real walkers (ETH/UCY), ideal "
+                        "or realistic sensing (docs/sensing.md)")
     pd.add_argument("--data", metavar="DIR", help="folder of the ETH/UCY files (default: "
                     "../shared/data/pedestrians or $COMPANION_PEDESTRIANS)")
     pd.add_argument("--controller", default="lqr", choices=[*CONTROLLERS, "all"],
