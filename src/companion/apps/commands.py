@@ -7,11 +7,9 @@ the file, line or key. Output files are written whole or not at all.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
-import os
 import sys
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -20,136 +18,28 @@ from tqdm import tqdm
 from companion import metrics
 from companion.apps import benchmark, plots, reproduce, table3, tune
 from companion.apps import pedestrians as walkers
-from companion.config import MAX_MAGNITUDE, load_toml
-from companion.control import CONTROLLERS, lookup, make_controller
+from companion.apps.args import (
+    UsageError,
+    build_scenario,
+    checked_controllers,
+    duration_arg,
+    floats_arg,
+    output_dir,
+    params_arg,
+    seed_arg,
+    workers_arg,
+)
+from companion.control import CONTROLLERS, lookup
 from companion.data import pedestrians
-from companion.errors import CompanionError, ConfigError
-from companion.geometry import wrap_2pi
 from companion.io import Outputs, save_figure, write_csv, write_json
-from companion.params import Params, load_sensing, params_from_mapping
 from companion.sim import convergence, soak
-from companion.sim.recorded import load_person_csv
 from companion.sim.runner import run_many
 from companion.sim.scenario import (
-    MAX_DURATION,
-    Scenario,
     builtin_names,
     load_scenario,
     run_scenario,
 )
-from companion.types import LOG_COLUMNS, TEXT_COLUMNS, Log, Pose
-
-
-class UsageError(CompanionError):
-    """Bad command-line usage."""
-
-
-def _floats(text: str, n: int, what: str) -> tuple[float, ...]:
-    parts = text.split(",")
-    try:
-        values = tuple(float(p) for p in parts)
-    except ValueError:
-        count = "a number" if n == 1 else f"{n} comma-separated numbers"
-        raise UsageError(f"{what}: expected {count}, got {text!r}") from None
-    if len(values) != n or not all(abs(v) <= MAX_MAGNITUDE for v in values):
-        count = "a finite number" if n == 1 else f"{n} comma-separated finite numbers"
-        raise UsageError(f"{what}: expected {count} of magnitude at most {MAX_MAGNITUDE:g}, "
-                         f"got {text!r}")
-    return values
-
-
-def _positive(text: str, what: str) -> float:
-    (value,) = _floats(text, 1, what)
-    if value <= 0:
-        raise UsageError(f"{what}: expected a positive number, got {text!r}")
-    return value
-
-
-def _duration(text: str, what: str = "--duration") -> float:
-    """A simulated duration in (0, MAX_DURATION] s."""
-    value = _positive(text, what)
-    if value > MAX_DURATION:
-        raise UsageError(f"{what}: expected at most {MAX_DURATION:g} s (a day), got {text!r}")
-    return value
-
-
-def _seed(seed: int) -> int:
-    if seed < 0:
-        raise UsageError(f"--seed: expected an integer >= 0, got {seed}")
-    return seed
-
-
-def checked_controllers(names: Sequence[str], params: Params, where: str | None) -> None:
-    """Build each controller once, so that weights without a stabilising gain are a one-line
-    error naming the file ``where`` they came from, before any work."""
-    for name in names:
-        try:
-            make_controller(name, params)
-        except CompanionError as exc:
-            raise UsageError(f"{where}: {exc}" if where else str(exc)) from None
-
-
-def params_arg(args: argparse.Namespace) -> Params:
-    """Table 1 defaults, or the ``--params FILE`` given, validated with the file's name, with
-    the ``--sensing`` given."""
-    params = Params() if not args.params else params_from_mapping(
-        load_toml(args.params), prefix=f"{args.params}: ")
-    return with_sensing(params, args)
-
-
-def with_sensing(params: Params, args: argparse.Namespace) -> Params:
-    sensing = getattr(args, "sensing", None)
-    return params if sensing is None else params.replace(sensing=load_sensing(sensing))
-
-
-def _overrides(args: argparse.Namespace) -> dict:
-    """Parameter overrides from --params, --side, --bearing and --distance."""
-    over: dict = {}
-    if args.params:
-        over = load_toml(args.params)
-        params_from_mapping(over, prefix=f"{args.params}: ")  # validate with the file's name
-    formation = dict(over.get("formation", {}))
-    if args.side and args.bearing is not None:
-        raise UsageError("--side and --bearing: give one, not both")
-    if args.side:
-        formation["bearing"] = args.side
-    if args.bearing is not None:
-        (bearing,) = _floats(args.bearing, 1, "--bearing")
-        formation["bearing"] = wrap_2pi(bearing)
-    if args.distance is not None:
-        formation["distance"] = _positive(args.distance, "--distance")
-    if formation:
-        over = dict(over, formation=formation)
-    return over
-
-
-def build_scenario(args: argparse.Namespace) -> Scenario:
-    sc = load_scenario(args.scenario)           # the file's own errors name the file
-    over = _overrides(args)
-    if over:
-        try:
-            sc = load_scenario(args.scenario, params_override=over)
-        except ConfigError as exc:              # the flags' errors name the flags
-            given = [f"--params {args.params}" if args.params else "",
-                     "--side" if args.side else "", "--bearing" if args.bearing else "",
-                     "--distance" if args.distance else ""]
-            detail = str(exc).split(": ", 1)[-1]
-            raise UsageError(f"{', '.join(g for g in given if g)}: {detail}") from None
-    changes: dict = {}
-    if args.controller:
-        changes["controller"] = args.controller
-    if args.start:
-        changes["start"] = Pose(*_floats(args.start, 3, "--start"))
-    if args.person_csv:
-        person = load_person_csv(args.person_csv)
-        changes["person"] = person
-        changes["duration"] = person.duration
-    if args.duration:
-        changes["duration"] = _duration(args.duration)
-    if args.obstacles:
-        changes["obstacle_source"] = args.obstacles
-    changes["params"] = with_sensing(sc.params, args)
-    return dataclasses.replace(sc, **changes)
+from companion.types import LOG_COLUMNS, TEXT_COLUMNS, Log
 
 
 def write_log(path: Path, log: Log) -> None:
@@ -177,20 +67,6 @@ def summary_lines(m: dict) -> list[str]:
         f"collisions {m['obstacle_collisions']}"])
 
 
-def output_dir(path: Path) -> Path:
-    """Check (before any work) that ``path`` can be an output folder; the outputs go into it
-    all together at the end (:class:`~companion.io.Outputs`)."""
-    if path.exists() and not path.is_dir():
-        raise UsageError(f"--out {path}: exists and is not a folder")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise UsageError(f"--out {path}: cannot write there ({exc.strerror})") from None
-    if not os.access(path, os.W_OK | os.X_OK):
-        raise UsageError(f"--out {path}: cannot write there (permission denied)")
-    return path
-
-
 tqdm.monitor_interval = 0   # no monitor thread: the runner forks worker processes
 
 
@@ -200,12 +76,6 @@ def progress_bar(total: int, unit: str) -> Iterator[Callable[[int], None]]:
     items done so far."""
     with tqdm(total=total, unit=unit, file=sys.stderr) as bar:
         yield lambda done: bar.update(done - bar.n)
-
-
-def workers_arg(args: argparse.Namespace) -> int | None:
-    if args.workers is not None and args.workers < 1:
-        raise UsageError(f"--workers: expected a whole number >= 1, got {args.workers}")
-    return args.workers
 
 
 def _write_run(out: Path, sc, plot: bool, log: Log, m: dict) -> list[str]:
@@ -262,10 +132,10 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
 def cmd_convergence(args: argparse.Namespace) -> int:
     params = params_arg(args)
     checked_controllers([args.controller], params, args.params)
-    speeds = _floats(args.speeds, len(args.speeds.split(",")), "--speeds")
+    speeds = floats_arg(args.speeds, len(args.speeds.split(",")), "--speeds")
     if any(v < 0 for v in speeds):
         raise UsageError(f"--speeds: expected speeds >= 0 m/s, got {args.speeds!r}")
-    duration = _duration(args.duration)
+    duration = duration_arg(args.duration)
     out = output_dir(Path(args.out or Path("out") / "convergence"))
     cases = list(convergence.cases(speeds))
     logs = run_many([convergence.episode(c, args.controller, params, duration) for c in cases],
@@ -346,11 +216,11 @@ def walkers_text(table: dict, paired: dict) -> str:
 def cmd_soak(args: argparse.Namespace) -> int:
     params = params_arg(args)
     checked_controllers([args.controller], params, args.params)
-    duration = _duration(args.duration)
+    duration = duration_arg(args.duration)
     out = output_dir(Path(args.out or Path("out") / "soak"))
     print(f"soak: {duration:g} s of a random walker among pillars (seed {args.seed}), "
           f"controller {args.controller}; about {duration / 25:.0f} s")
-    summary, log = soak.run_soak(duration, _seed(args.seed), args.controller, params)
+    summary, log = soak.run_soak(duration, seed_arg(args.seed), args.controller, params)
     with Outputs(out, "soak") as stage:
         write_json(stage / "soak.json", summary)
         written = ["soak.json"]
@@ -397,7 +267,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
           f"scenarios {', '.join(c.name for c in tune.tuning_scenarios())}")
     cases = len(tune.tuning_scenarios())
     with progress_bar(args.budget * cases, "episode") as progress:
-        result = tune.tune(args.controller, params, args.budget, _seed(args.seed),
+        result = tune.tune(args.controller, params, args.budget, seed_arg(args.seed),
                            workers_arg(args), progress)
     print(f"J: current gains {result.start_score:.4f}, best {result.best_score:.4f}")
     for dim, value in zip(result.dims, result.best):
@@ -408,7 +278,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     if args.episodes < 1:
         raise UsageError(f"--episodes: expected a whole number >= 1, got {args.episodes}")
-    duration = _duration(args.duration)
+    duration = duration_arg(args.duration)
     result = benchmark.run(args.episodes, duration, workers_arg(args), not args.no_first_step,
                            progress=lambda msg: print(f"bench: {msg}", file=sys.stderr))
     if args.out:

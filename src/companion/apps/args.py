@@ -1,0 +1,153 @@
+"""Command-line arguments turned into validated inputs: numbers, seeds, durations, parameter
+files, scenarios with their flag overrides, output folders. Every error is a one-line
+:class:`UsageError` (or the file's own ConfigError) naming the flag, file or key, raised
+before any work."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+from companion.config import MAX_MAGNITUDE, load_toml
+from companion.control import make_controller
+from companion.errors import CompanionError, ConfigError
+from companion.geometry import wrap_2pi
+from companion.params import Params, load_sensing, params_from_mapping
+from companion.sim.recorded import load_person_csv
+from companion.sim.scenario import MAX_DURATION, Scenario, load_scenario
+from companion.types import Pose
+
+
+class UsageError(CompanionError):
+    """Bad command-line usage."""
+
+
+def floats_arg(text: str, n: int, what: str) -> tuple[float, ...]:
+    parts = text.split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        count = "a number" if n == 1 else f"{n} comma-separated numbers"
+        raise UsageError(f"{what}: expected {count}, got {text!r}") from None
+    if len(values) != n or not all(abs(v) <= MAX_MAGNITUDE for v in values):
+        count = "a finite number" if n == 1 else f"{n} comma-separated finite numbers"
+        raise UsageError(f"{what}: expected {count} of magnitude at most {MAX_MAGNITUDE:g}, "
+                         f"got {text!r}")
+    return values
+
+
+def positive_arg(text: str, what: str) -> float:
+    (value,) = floats_arg(text, 1, what)
+    if value <= 0:
+        raise UsageError(f"{what}: expected a positive number, got {text!r}")
+    return value
+
+
+def duration_arg(text: str, what: str = "--duration") -> float:
+    """A simulated duration in (0, MAX_DURATION] s."""
+    value = positive_arg(text, what)
+    if value > MAX_DURATION:
+        raise UsageError(f"{what}: expected at most {MAX_DURATION:g} s (a day), got {text!r}")
+    return value
+
+
+def seed_arg(seed: int) -> int:
+    if seed < 0:
+        raise UsageError(f"--seed: expected an integer >= 0, got {seed}")
+    return seed
+
+
+def checked_controllers(names: Sequence[str], params: Params, where: str | None) -> None:
+    """Build each controller once, so that weights without a stabilising gain are a one-line
+    error naming the file ``where`` they came from, before any work."""
+    for name in names:
+        try:
+            make_controller(name, params)
+        except CompanionError as exc:
+            raise UsageError(f"{where}: {exc}" if where else str(exc)) from None
+
+
+def params_arg(args: argparse.Namespace) -> Params:
+    """Table 1 defaults, or the ``--params FILE`` given, validated with the file's name, with
+    the ``--sensing`` given."""
+    params = Params() if not args.params else params_from_mapping(
+        load_toml(args.params), prefix=f"{args.params}: ")
+    return with_sensing(params, args)
+
+
+def with_sensing(params: Params, args: argparse.Namespace) -> Params:
+    sensing = getattr(args, "sensing", None)
+    return params if sensing is None else params.replace(sensing=load_sensing(sensing))
+
+
+def overrides(args: argparse.Namespace) -> dict:
+    """Parameter overrides from --params, --side, --bearing and --distance."""
+    over: dict = {}
+    if args.params:
+        over = load_toml(args.params)
+        params_from_mapping(over, prefix=f"{args.params}: ")  # validate with the file's name
+    formation = dict(over.get("formation", {}))
+    if args.side and args.bearing is not None:
+        raise UsageError("--side and --bearing: give one, not both")
+    if args.side:
+        formation["bearing"] = args.side
+    if args.bearing is not None:
+        (bearing,) = floats_arg(args.bearing, 1, "--bearing")
+        formation["bearing"] = wrap_2pi(bearing)
+    if args.distance is not None:
+        formation["distance"] = positive_arg(args.distance, "--distance")
+    if formation:
+        over = dict(over, formation=formation)
+    return over
+
+
+def build_scenario(args: argparse.Namespace) -> Scenario:
+    sc = load_scenario(args.scenario)           # the file's own errors name the file
+    over = overrides(args)
+    if over:
+        try:
+            sc = load_scenario(args.scenario, params_override=over)
+        except ConfigError as exc:              # the flags' errors name the flags
+            given = [f"--params {args.params}" if args.params else "",
+                     "--side" if args.side else "", "--bearing" if args.bearing else "",
+                     "--distance" if args.distance else ""]
+            detail = str(exc).split(": ", 1)[-1]
+            raise UsageError(f"{', '.join(g for g in given if g)}: {detail}") from None
+    changes: dict = {}
+    if args.controller:
+        changes["controller"] = args.controller
+    if args.start:
+        changes["start"] = Pose(*floats_arg(args.start, 3, "--start"))
+    if args.person_csv:
+        person = load_person_csv(args.person_csv)
+        changes["person"] = person
+        changes["duration"] = person.duration
+    if args.duration:
+        changes["duration"] = duration_arg(args.duration)
+    if args.obstacles:
+        changes["obstacle_source"] = args.obstacles
+    changes["params"] = with_sensing(sc.params, args)
+    return dataclasses.replace(sc, **changes)
+
+
+def output_dir(path: Path) -> Path:
+    """Check (before any work) that ``path`` can be an output folder; the outputs go into it
+    all together at the end (:class:`~companion.io.Outputs`)."""
+    if path.exists() and not path.is_dir():
+        raise UsageError(f"--out {path}: exists and is not a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"--out {path}: cannot write there ({exc.strerror})") from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise UsageError(f"--out {path}: cannot write there (permission denied)")
+    return path
+
+
+def workers_arg(args: argparse.Namespace) -> int | None:
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers: expected a whole number >= 1, got {args.workers}")
+    return args.workers
