@@ -55,12 +55,13 @@ def parser() -> argparse.ArgumentParser:
     run.add_argument("--side", choices=SIDES, help="side of the person to walk on")
     run.add_argument("--bearing", metavar="RAD", help="desired bearing alpha_d in rad "
                      "(left pi/2, behind pi, right 3pi/2)")
-    run.add_argument("--distance", metavar="M", help="desired distance rho_d in m")
+    run.add_argument("--distance", metavar="M", help="desired distance rho_d in m (> 0, "
+                     "with the slot outside keepout.person_clearance)")
     run.add_argument("--start", metavar="X,Y,THETA", help="robot start pose (m, m, rad); "
                      "default: in the slot. Write --start=-1,2,0 when X is negative")
     run.add_argument("--person-csv", metavar="FILE", help="CSV with header t,x,y replacing "
                      "the scenario's person motion (duration: the recording's)")
-    run.add_argument("--duration", metavar="S", help="simulated time in s")
+    run.add_argument("--duration", metavar="S", help="simulated time in s, at most 86400")
     run.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides "
                      "(docs/parameters.md)")
     run.add_argument("--obstacles", choices=("truth", "lidar"),
@@ -81,7 +82,7 @@ def parser() -> argparse.ArgumentParser:
     tn = sub.add_parser("tune", help="tune a controller's gains (docs/baselines.md)")
     tn.add_argument("controller", choices=TUNABLE)
     tn.add_argument("--budget", type=int, default=64, help="candidates (default 64)")
-    tn.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    tn.add_argument("--seed", type=int, default=0, help="random seed >= 0 (default 0)")
     tn.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
     _workers(tn)
     _sensing(tn)
@@ -94,7 +95,8 @@ def parser() -> argparse.ArgumentParser:
     cv.add_argument("--controller", default="lqr", choices=CONTROLLERS)
     cv.add_argument("--speeds", default="0.5,1.0", metavar="V1,V2",
                     help="person speeds in m/s (default 0.5,1.0)")
-    cv.add_argument("--duration", default="30", metavar="S", help="simulated time per run")
+    cv.add_argument("--duration", default="30", metavar="S",
+                    help="simulated time per run in s, at most 86400 (default 30)")
     cv.add_argument("--settle-limit", type=float, default=20.0, metavar="S",
                     help="a run must settle within this time (default 20 s)")
     cv.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
@@ -125,8 +127,9 @@ def parser() -> argparse.ArgumentParser:
     sk = sub.add_parser("soak", help="long run of a random walker among obstacles "
                         "(docs/safety.md); exit 1 on a collision or a non-finite value")
     sk.add_argument("--duration", default="3600", metavar="S",
-                    help="simulated time in s (default 3600)")
-    sk.add_argument("--seed", type=int, default=0, help="world and walk seed (default 0)")
+                    help="simulated time in s, at most 86400 (default 3600)")
+    sk.add_argument("--seed", type=int, default=0,
+                    help="world and walk seed >= 0 (default 0)")
     sk.add_argument("--controller", default="lqr", choices=CONTROLLERS)
     sk.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
     sk.add_argument("--log", action="store_true", help="also write log.csv")
@@ -141,7 +144,7 @@ def parser() -> argparse.ArgumentParser:
     bn.add_argument("--episodes", type=int, default=48,
                     help="figure-8 episodes in the throughput measurement (default 48)")
     bn.add_argument("--duration", default="60", metavar="S",
-                    help="simulated time per episode in s (default 60)")
+                    help="simulated time per episode in s, at most 86400 (default 60)")
     bn.add_argument("--no-first-step", action="store_true",
                     help="skip the fresh-process first-step measurement (numba compile)")
     bn.add_argument("--out", metavar="FILE", help="also write the JSON figures to FILE")
