@@ -525,3 +525,24 @@ def test_fault2_an_absurd_robot_pose_stops_the_robot(name):
         cmd = sup.step(Observation(k * DT, Pose(1e300, 0.0, 0.0), h))
         assert cmd.status == "stopped" and cmd.reason.startswith("robot_pose_invalid")
     assert cmd.v == 0.0 and cmd.omega == 0.0
+
+
+def test_invalid_odometry_is_reported_then_stops_the_robot():
+    """NaN or impossible odometry is not the robot's velocity: reported at once, and after
+    supervisor.odometry_timeout_s a controlled stop; valid odometry resumes."""
+    sup = make_controller("lqr", P)
+    sup.reset()
+    h = PersonState(0.0, 1.0, 0.0, 1.0, 0.0)
+    pose = Pose(-0.25, 0.0, 0.0)
+    sup.step(Observation(0.0, pose, h, robot_velocity=(1.0, 0.0)))
+    bad = [(math.nan, 0.0), (50.0, 0.0)]
+    statuses = []
+    n = int(S.odometry_timeout_s / DT) + 5
+    for k in range(1, n + 1):
+        cmd = sup.step(Observation(k * DT, pose, h, robot_velocity=bad[k % 2]))
+        assert "odometry_invalid" in cmd.reason.split("+")
+        statuses.append(cmd.status)
+    assert statuses[0] == "degraded" and statuses[-1] == "stopped"
+    assert cmd.reason.startswith("odometry_lost")
+    cmd = sup.step(Observation((n + 1) * DT, pose, h, robot_velocity=(0.0, 0.0)))
+    assert cmd.status != "stopped"

@@ -55,6 +55,7 @@ class SafetySupervisor:
         self._inner_fresh = False     # inner must be reset before its next step
         self._prev = (0.0, 0.0)       # last output (v, omega)
         self._started = False         # _prev is known (a step, or applied())
+        self._odometry_bad_since: float | None = None       # odometry invalid since
         self._clock.reset()
         self._tracker.reset()
         self._sensor_t = 0.0          # the sensor clock: the last valid time, periods counted on
@@ -90,7 +91,10 @@ class SafetySupervisor:
         scan = None if obs.scan is None else checked_scan(obs.scan, p.lidar.range_max)
         if not stop and obs.scan is not None:
             stop = "scan_invalid" if scan is None else checks.scan_fault(scan, p, reasons)
-        velocity = self._velocity(obs)
+        velocity = self._velocity(obs, reasons)
+        if not stop and self._odometry_bad_since is not None \
+                and self._sensor_t - self._odometry_bad_since > p.supervisor.odometry_timeout_s:
+            stop = "odometry_lost"
         if not self._started:         # the rate limits start from the measured velocity
             self._prev, self._started = self._limited(velocity), True
 
@@ -156,10 +160,19 @@ class SafetySupervisor:
             at = pose
         return at
 
-    def _velocity(self, obs: Observation) -> tuple[float, float]:
-        """The robot's velocity: odometry if it is given and finite, else the last command."""
-        v = obs.robot_velocity
-        return v if v is not None and checks.finite(*v) else self._prev
+    def _velocity(self, obs: Observation, reasons: list[str]) -> tuple[float, float]:
+        """The robot's velocity: odometry if it is given and plausible (finite, at most twice
+        the velocity limits), else the last command; invalid odometry is reported."""
+        v, r = obs.robot_velocity, self.params.robot
+        if v is None:
+            return self._prev
+        if checks.finite(*v) and abs(v[0]) <= 2.0 * r.v_max and abs(v[1]) <= 2.0 * r.omega_max:
+            self._odometry_bad_since = None
+            return v
+        reasons.append("odometry_invalid")
+        if self._odometry_bad_since is None:
+            self._odometry_bad_since = self._sensor_t
+        return self._prev
 
     def _ahead(self, obs: Observation, estimate: PersonEstimate, obstacles: tuple,
                scan: Scan | None, velocity: tuple[float, float]) -> Observation:

@@ -150,6 +150,11 @@ class SupervisorParams(Validated):
                                 "slot above this for longer than slot_error_time_s is reported "
                                 "(degraded: slot_error)", positive)
     slot_error_time_s: float = param(2.0, "s", "see slot_error_m", positive)
+    odometry_timeout_s: float = param(0.5, "s", "odometry that is given but invalid (not "
+                                      "finite, or faster than twice the velocity limits) is "
+                                      "reported (degraded: odometry_invalid) and replaced by "
+                                      "the last command; for longer than this the robot stops "
+                                      "(stopped: odometry_lost)", positive)
 
 
 @dataclasses.dataclass(frozen=True)
