@@ -101,7 +101,9 @@ def test_an_interrupted_run_leaves_the_folder_as_it_was(tmp_path, sig):
         code = proc.wait(timeout=60)
     finally:
         proc.kill()
-    assert code == (143 if sig == signal.SIGTERM else 130), proc.stderr.read()
+    # 128 + signal from our handler; -signal if it arrives while numba first compiles (LLVM
+    # then handles SIGINT by dying of it): both mean "interrupted", and nothing is written
+    assert code in (128 + sig, -sig), proc.stderr.read()
     assert snapshot(tmp_path) == before
     assert not list(tmp_path.glob(f"{STAGING}*"))
 
