@@ -51,6 +51,17 @@ def wrap_2pi(angle: float) -> float:
 
 
 @jitable
+def lagged(actual: float, command: float, tau: float, dt: float) -> tuple[float, float]:
+    """``(next, mean)``: a first-order lag of time constant ``tau`` from ``actual`` towards
+    ``command`` held over ``dt``: the value after ``dt`` and the mean over it (a robot base's
+    response to a velocity command; ``tau`` 0: instant)."""
+    if tau <= 0.0:
+        return command, command
+    a = math.exp(-dt / tau)
+    return command + (actual - command) * a, command + (actual - command) * tau / dt * (1 - a)
+
+
+@jitable
 def unicycle_step(x: float, y: float, theta: float, v: float, omega: float, dt: float
                   ) -> tuple[float, float, float]:
     """Pose after ``dt`` s at constant ``v`` and ``omega``: the exact circular arc (a straight

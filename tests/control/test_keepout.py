@@ -19,9 +19,8 @@ from companion.control.keepout import (
     rollout_margins,
     speed_up_distance,
 )
-from companion.geometry import clearance, obstacle_arrays, unicycle_step
+from companion.geometry import clearance, lagged, obstacle_arrays, unicycle_step
 from companion.params import REALISTIC, Params
-from companion.sim.episode import lagged
 from companion.tracking import predict
 from companion.types import Circle, PersonEstimate, PersonState, Pose, Wall
 
@@ -92,9 +91,9 @@ def test_an_uncertain_person_is_kept_farther_away_and_the_lag_counts_as_reaction
         v = braking_bound(1.5, pose, person, (), P, [], grow=grow)
         pose = Pose(*unicycle_step(pose.x, pose.y, pose.theta, v, 0.0, P.dt))
     assert -pose.x == pytest.approx(P.keepout.protective_distance + grow, abs=0.02)
-    lagged = P.replace(sensing=REALISTIC)          # 0.2 s of actuator lag
+    with_lag = P.replace(sensing=REALISTIC)          # 0.2 s of actuator lag
     far = Pose(-1.5, 0.0, 0.0)
-    assert braking_bound(1.5, far, person, (), lagged, []) \
+    assert braking_bound(1.5, far, person, (), with_lag, []) \
         < braking_bound(1.5, far, person, (), P, []) - 0.2
 
 

@@ -5,9 +5,9 @@ import pytest
 
 from companion.control import make_bare, make_controller
 from companion.errors import ConfigError
-from companion.geometry import unicycle_step, wrap_pi, wrap_pi_array
+from companion.geometry import lagged, unicycle_step, wrap_pi, wrap_pi_array
 from companion.params import REALISTIC, Params
-from companion.sim.episode import lagged, run_episode
+from companion.sim.episode import run_episode
 from companion.sim.person import Figure8, circle, line
 from companion.types import LOG_COLUMNS, TEXT_COLUMNS
 

@@ -33,6 +33,7 @@ from companion._jit import jitable, kernel
 from companion.geometry import (
     ObstacleArrays,
     clearance,
+    lagged,
     min_clearance,
     obstacle_arrays,
     segment_point,
@@ -118,9 +119,9 @@ def heading_std(estimate: PersonEstimate) -> float:
 
 
 def barrier_speed(v: float, robot: Pose, person: PersonState, obstacles: Sequence[Obstacle],
-                  params: Params, grow: float = 0.0) -> float:
-    """Rule 1: the speed closest to ``v`` that meets the comfort barriers (the person's
-    clearance grown by ``grow`` m)."""
+                  params: Params) -> float:
+    """Rule 1: the speed closest to ``v`` that meets the comfort barriers (not grown by the
+    person's uncertainty: that would push the robot out of its slot on every noisy step)."""
     k = params.keepout
     bounds = []
     if k.person_clearance > 0.0:
@@ -129,7 +130,7 @@ def barrier_speed(v: float, robot: Pose, person: PersonState, obstacles: Sequenc
             return 0.0  # no direction to move away along
         nx, ny, dist, approach = normal
         bounds.append(speed_bound(robot.theta, nx, ny, approach,
-                                  k.barrier_rate * (dist - k.person_clearance - grow)))
+                                  k.barrier_rate * (dist - k.person_clearance)))
     if k.obstacle_clearance > 0.0:
         for nx, ny, gap in obstacle_normals(robot, obstacles, params.robot.radius):
             bounds.append(speed_bound(robot.theta, nx, ny, 0.0,
@@ -252,7 +253,6 @@ def rollout_margins(x0: float, y0: float, th0: float, v0: float, w0: float,
             extra = speed_up_distance(spec.pv, spec.person_accel, t)
             hx[j, k] = qx + extra * math.cos(heading)
             hy[j, k] = qy + extra * math.sin(heading)
-    follow = 1.0 - math.exp(-spec.step / spec.lag) if spec.lag > 0.0 else 1.0
     out = np.empty(targets.shape[0])
     for i in range(targets.shape[0]):
         x, y, th = x0, y0, th0
@@ -262,8 +262,8 @@ def rollout_margins(x0: float, y0: float, th0: float, v0: float, w0: float,
             t = (k + 1) * spec.step
             v = v0 + min(max(targets[i, 0] - v0, -spec.v_rate * t), spec.v_rate * t)
             w = w0 + min(max(targets[i, 1] - w0, -spec.w_rate * t), spec.w_rate * t)
-            va += follow * (v - va)
-            wa += follow * (w - wa)
+            va = lagged(va, v, spec.lag, spec.step)[0]
+            wa = lagged(wa, w, spec.lag, spec.step)[0]
             x, y, th = unicycle_step(x, y, th, va, wa, spec.step)
             margin = min(margin, min_clearance(x, y, obstacles, spec.radius))
             for j in range(m):

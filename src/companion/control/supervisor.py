@@ -12,7 +12,7 @@ and the person estimate. Per call:
 3. robot pose, obstacles and scan (:mod:`companion.control.checks`);
 4. the wrapped controller, on a checked observation predicted to the moment its command takes
    effect (``sensing.actuator_tau_s`` on), the same for every controller;
-5. keep-out rules, with the person's distances grown by its position uncertainty
+5. keep-out rules, with the protective distance grown by the person's uncertainty
    (:func:`companion.control.keepout.keep_out`);
 6. rate and velocity limits (:func:`companion.control.limits.limit`); a stopped robot's target
    is zero, so it brakes at the limits.
@@ -24,7 +24,7 @@ import math
 from collections import deque
 
 from companion.control import checks
-from companion.control.base import Controller
+from companion.control.base import Controller, saturate
 from companion.control.keepout import keep_out
 from companion.control.limits import limit
 from companion.control.slot import reference_point, slot_point
@@ -96,7 +96,7 @@ class SafetySupervisor:
                 and self._sensor_t - self._odometry_bad_since > p.supervisor.odometry_timeout_s:
             stop = "odometry_lost"
         if not self._started:         # the rate limits start from the measured velocity
-            self._prev, self._started = self._limited(velocity), True
+            self._prev, self._started = saturate(*velocity, self.params.robot), True
 
         stepped = False
         target = (*self._prev, 0.0)
@@ -128,13 +128,8 @@ class SafetySupervisor:
         """Told the command the robot executes outside a step (its velocity at the start of an
         episode): the rate limits start from it."""
         if checks.finite(cmd.v, cmd.omega):
-            self._prev, self._started = self._limited((cmd.v, cmd.omega)), True
+            self._prev, self._started = saturate(cmd.v, cmd.omega, self.params.robot), True
             self.inner.applied(cmd)
-
-    def _limited(self, velocity: tuple[float, float]) -> tuple[float, float]:
-        r = self.params.robot
-        return (min(max(velocity[0], -r.v_max), r.v_max),
-                min(max(velocity[1], -r.omega_max), r.omega_max))
 
     # -- the pieces -----------------------------------------------------------------------
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from companion.control.base import Controller
 from companion.errors import ConfigError
-from companion.geometry import clearance, unicycle_step, wrap_pi
+from companion.geometry import clearance, lagged, unicycle_step, wrap_pi
 from companion.model import relative_state, robot_pose_at, slot_reference
 from companion.params import IDEAL, Params
 from companion.sim.faults import Fault, stalled
@@ -44,15 +44,6 @@ def nearest_clearance(x: float, y: float, obstacles: Sequence[Obstacle], footpri
     if not obstacles:
         return math.nan
     return min(clearance(ob, x, y, footprint) for ob in obstacles)
-
-
-def lagged(actual: float, command: float, tau: float, dt: float) -> tuple[float, float]:
-    """``(next, mean)``: a first-order lag of time constant ``tau`` from ``actual`` towards
-    ``command`` held over ``dt``: the value after ``dt`` and the mean over it."""
-    if tau <= 0.0:
-        return command, command
-    a = math.exp(-dt / tau)
-    return command + (actual - command) * a, command + (actual - command) * tau / dt * (1 - a)
 
 
 def timed_out(command: tuple[float, float], params: Params) -> tuple[float, float]:
