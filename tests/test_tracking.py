@@ -226,3 +226,20 @@ def test_a_clock_that_goes_back_past_the_track_loses_the_person_instead_of_raisi
     assert tr.estimate(1.0) is None and tr.lost
     walk(tr, np.arange(2.0, 3.0, 0.1), straight)          # a new track can start again
     assert tr.estimate(2.9) is not None and not tr.lost
+
+
+def test_exact_parts_that_contradict_the_track_never_raise():
+    """Detections with an 'exact' heading (std 0) that contradicts the walk (a driver that
+    fills an unknown heading with 0) make the innovation covariance singular; the filter
+    skips that model's update instead of raising out of the step (before: 49 of 200 such
+    walks raised ValueError)."""
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        tr = PersonTracker(TP)
+        for t in np.arange(0.0, 4.0, 0.1):
+            x, y = 1.2 * t * math.cos(0.5), 1.2 * t * math.sin(0.5)
+            exact_heading = {"heading": 0.0, "heading_std": 0.0} if t >= 1.0 else {}
+            tr.add([seen(t, x + 0.05 * rng.standard_normal(), y + 0.05 * rng.standard_normal(),
+                         covariance=(0.0025, 0.0, 0.0, 0.0025), **exact_heading)], t)
+            e = tr.estimate(t)
+            assert e is None or (np.all(np.isfinite(e.covariance)) and math.isfinite(e.state.x))

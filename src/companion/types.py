@@ -145,6 +145,7 @@ class Observation:
     scan: Scan | None = None
     robot_velocity: tuple[float, float] | None = None
     detections: tuple[PersonDetection, ...] = ()
+    stale: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

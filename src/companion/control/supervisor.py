@@ -79,7 +79,9 @@ class SafetySupervisor:
         else:
             self._sensor_t += p.dt
         estimate = self._tracker.estimate(self._sensor_t, reasons)
-        if not checks.pose_is_finite(obs.robot):
+        if obs.stale:
+            stop = "+".join(f"{source}_stale" for source in obs.stale)
+        elif not checks.pose_is_finite(obs.robot):
             stop = "robot_pose_invalid"
         elif estimate is None:
             stop = "reacquiring" if self._tracker.reacquiring else "person_lost"

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+from scipy.stats import multivariate_normal
 
 from companion.geometry import unicycle_step, wrap_pi, wrap_pi_array
 from companion.params import TrackerParams
@@ -197,17 +198,33 @@ class WalkerFilter:
         for j in range(2):
             ukf.x, ukf.P = b.xs[j].copy(), b.ps[j] + 1e-12 * np.eye(5)
             ukf.sigmas_f = ukf.points_fn.sigma_points(ukf.x, ukf.P)
-            ukf.update(z, R=r, UT=_unscented_transform, hx=hx)
+            try:
+                ukf.update(z, R=r, UT=_unscented_transform, hx=hx)
+            except (ValueError, np.linalg.LinAlgError):   # a singular innovation: no update
+                xs[j], ps[j], log_l[j] = b.xs[j], b.ps[j], -math.inf
+                continue
             x = ukf.x.copy()
             speed = math.hypot(x[2], x[3])
             if speed > p.max_person_speed:
                 x[2:4] *= p.max_person_speed / speed * (1.0 - 1e-12)   # rounding stays below
             x[4] = min(max(x[4], -p.max_person_turn_rate), p.max_person_turn_rate)
             xs[j], ps[j] = x, 0.5 * (ukf.P + ukf.P.T)
-            log_l[j] = ukf.log_likelihood
-        mu = b.mu * np.exp(log_l - log_l.max())
+            log_l[j] = _log_likelihood(ukf.y, ukf.S)
+        top = log_l.max()
+        mu = b.mu * (np.exp(log_l - top) if math.isfinite(top) else 1.0)
         mu = np.clip(mu / mu.sum(), 1e-6, 1.0)
         return Belief(xs, ps, mu / mu.sum())
+
+
+def _log_likelihood(y: np.ndarray, s: np.ndarray) -> float:
+    """log N(y; 0, S) of the innovation, with S symmetrised (the unscented transform leaves it
+    asymmetric by rounding) and -inf where it is not a covariance (never raises)."""
+    s = 0.5 * (s + s.T)
+    try:
+        value = multivariate_normal.logpdf(y, cov=s, allow_singular=True)
+    except (ValueError, np.linalg.LinAlgError):
+        return -math.inf
+    return float(value) if math.isfinite(value) else -math.inf
 
 
 def _both(x: np.ndarray, p: np.ndarray, maneuver: float) -> Belief:

@@ -1,0 +1,138 @@
+"""``companion sim-robot``: the simulator as a ROS 2 robot.
+
+The episode runs as ``companion run`` runs it (:func:`companion.sim.episode.run_episode`:
+person, sensing model, LiDAR, actuator lag, the log), but the controller is on the wire:
+:class:`WireRobot` stands in the controller's place, publishes what the robot senses at
+each sample (/odom, /tf odom -> base_link, /scan, /person detections, /clock) and hands the
+plant the last /cmd_vel received. Like ros2_control's diff_drive_controller it brakes to a
+stop at the deceleration limits when no command came for ``robot.command_timeout_s``.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from companion.params import Params
+from companion.ros import convert
+from companion.ros.convert import Stamped
+from companion.ros.settings import RosParams
+from companion.ros.transport import DEFAULT, SENSOR_DATA, Qos, Transport
+from companion.sim.episode import run_episode, timed_out
+from companion.sim.runner import EpisodeSpec
+from companion.sim.sensing import LidarPerception
+from companion.types import Command, Log, Observation
+
+
+class Pacer:
+    """Holds a simulation to the system clock: sample time ``t`` happens ``t / rate`` s after
+    the start (``rate`` 0: as fast as possible)."""
+
+    def __init__(self, rate: float, stop: threading.Event | None = None):
+        self.rate, self.stop = rate, stop or threading.Event()
+        self.start: float | None = None
+
+    def wait(self, t: float) -> None:
+        if self.start is None:
+            self.start = time.monotonic()
+        if self.rate > 0.0:
+            self.stop.wait(max(0.0, self.start + t / self.rate - time.monotonic()))
+
+
+class WireRobot:
+    """A controller in the episode's loop that is really a ROS 2 robot's interface."""
+
+    takes_detections = True
+
+    def __init__(self, transport: Transport, ros: RosParams, params: Params, pacer: Pacer,
+                 epoch: float = 0.0, after: Callable[[float], None] | None = None):
+        """``epoch`` is added to simulated time in stamps (the system clock at the start;
+        0 with ``use_sim_time``); ``after(t)`` runs once the sample's messages are out (a
+        lock-step test ticks the node there)."""
+        self.ros, self.params, self.pacer, self.epoch, self.after = ros, params, pacer, \
+            epoch, after
+        t = ros.topics
+        self._odom = transport.publisher(t.odom, "nav_msgs/msg/Odometry", DEFAULT)
+        self._tf = transport.publisher("/tf", "tf2_msgs/msg/TFMessage", Qos(depth=100))
+        self._scan = transport.publisher(t.scan, "sensor_msgs/msg/LaserScan", SENSOR_DATA) \
+            if t.scan else None
+        kind = ros.person_type
+        self._person = transport.publisher(t.person, convert.PERSON_TYPES[kind], DEFAULT)
+        self._clock = transport.publisher(t.clock, "rosgraph_msgs/msg/Clock",
+                                          Qos(reliable=False, depth=1)) \
+            if ros.use_sim_time else None
+        cmd_type = "geometry_msgs/msg/TwistStamped" if ros.cmd_vel_stamped \
+            else "geometry_msgs/msg/Twist"
+        self._lock = threading.Lock()
+        self._received: tuple[float, float] | None = None
+        self.commands = 0
+        transport.subscribe(t.cmd_vel, cmd_type, self._on_cmd, DEFAULT)
+        self.reset()
+
+    def _on_cmd(self, msg: Any) -> None:
+        v, w = convert.twist_velocity(msg)
+        if math.isfinite(v) and math.isfinite(w):
+            with self._lock:
+                self._received = (v, w)
+                self.commands += 1
+
+    def reset(self) -> None:
+        self._base = (0.0, 0.0)
+        self._last_cmd_t = 0.0
+        self._last_scan = None
+
+    def applied(self, cmd: Command) -> None:
+        self._base = (cmd.v, cmd.omega)
+
+    def step(self, obs: Observation) -> Command:
+        self.pacer.wait(obs.t)
+        stamp = self.epoch + obs.t
+        r = self.ros
+        if self._clock is not None:
+            self._clock(convert.clock_msg(stamp))
+        velocity = obs.robot_velocity or (0.0, 0.0)
+        self._odom(convert.odometry_msg(stamp, obs.robot, velocity, r.odom_frame,
+                                        r.base_frame))
+        self._tf(convert.tf_msg(stamp, obs.robot, r.odom_frame, r.base_frame))
+        if self._scan is not None and obs.scan is not None and obs.scan is not self._last_scan:
+            self._last_scan = obs.scan
+            period = 1.0 / self.params.sensing.lidar_rate_hz
+            self._scan(convert.scan_msg(stamp, obs.scan, r.lidar_frame, period))
+        if obs.detections:
+            frames = {self.params.tracker.world_frame: r.odom_frame,
+                      self.params.tracker.robot_frame: r.base_frame}
+            people = [Stamped(self.epoch + d.t, d.x, d.y, frames.get(d.frame, d.frame),
+                              d.covariance, d.heading, d.heading_std, d.speed, d.turn_rate,
+                              d.velocity_std) for d in obs.detections]
+            if r.person_type == "pose_array":
+                for frame in dict.fromkeys(p.frame for p in people):
+                    group = [p for p in people if p.frame == frame]
+                    self._person(convert.person_msg(group, "pose_array", group[-1].t, frame))
+            else:
+                for p in people:
+                    self._person(convert.person_msg([p], r.person_type, p.t, p.frame))
+        if self.after is not None:
+            self.after(obs.t)
+        with self._lock:
+            received, self._received = self._received, None
+        if received is not None:
+            self._base, self._last_cmd_t = received, obs.t
+        elif obs.t - self._last_cmd_t >= self.params.robot.command_timeout_s - 1e-9:
+            self._base = timed_out(self._base, self.params)
+        return Command(*self._base)
+
+
+def run_sim_robot(spec: EpisodeSpec, transport: Transport, ros: RosParams, pacer: Pacer,
+                  epoch: float = 0.0, after: Callable[[float], None] | None = None
+                  ) -> tuple[Log, WireRobot]:
+    """Run ``spec`` with its controller on the wire; the robot senses with a LiDAR (a ROS
+    robot publishes /scan). Returns the log and the robot (its command count)."""
+    robot = WireRobot(transport, ros, spec.params, pacer, epoch, after)
+    log = run_episode(robot, spec.person, spec.params, spec.duration, start=spec.start,
+                      seed=spec.seed, obstacles=spec.obstacles,
+                      perception=LidarPerception(spec.params), faults=spec.faults,
+                      start_velocity=spec.start_velocity or (0.0, 0.0))
+    return log, robot

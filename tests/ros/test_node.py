@@ -1,0 +1,186 @@
+"""The node and the simulated robot over an in-memory ROS 2 graph (no network): the closed loop
+equals the simulation, stale inputs stop the robot, frames and stamps place the inputs."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import threading
+
+import numpy as np
+import pytest
+
+from companion import metrics
+from companion.ros import convert
+from companion.ros.messages import typestore
+from companion.ros.node import CompanionNode, pose_at, spin
+from companion.ros.settings import config_from_mapping
+from companion.ros.sim_robot import Pacer, run_sim_robot
+from companion.ros.transport import MemoryBus, MemoryTransport
+from companion.sim.runner import run_one
+from companion.sim.scenario import load_scenario
+from companion.types import Pose, Scan
+
+
+def graph():
+    bus = MemoryBus()
+    return bus, (lambda: MemoryTransport(bus, typestore()))
+
+
+def lockstep(sensing: str, person_type: str, duration: float, scenario: str = "figure8"):
+    """sim-robot and node on one bus, the node ticked right after each sample's messages."""
+    sc = load_scenario(scenario, {"sensing": sensing})
+    bus, transport = graph()
+    cfg = config_from_mapping({"ros": {"use_sim_time": True, "person_type": person_type}})
+    cfg = dataclasses.replace(cfg, params=sc.params, controller=sc.controller)
+    node = CompanionNode(cfg, transport())
+    spec = dataclasses.replace(sc.episode(), duration=duration)
+    log, robot = run_sim_robot(spec, transport(), cfg.ros, Pacer(0.0), after=node.tick)
+    return spec, log, robot, bus
+
+
+@pytest.mark.parametrize("sensing", ["ideal", "realistic"])
+def test_the_loop_over_the_wire_equals_the_simulation(sensing):
+    """With detections that carry everything the sensing model measures (nav_msgs/Odometry),
+    node + sim-robot give the simulation's trajectory: the wire loses nothing but rounding."""
+    spec, log, robot, _ = lockstep(sensing, "odometry", 20.0)
+    direct = run_one(dataclasses.replace(spec, obstacle_source="lidar",
+                                         start_velocity=(0.0, 0.0)))
+    assert robot.commands == len(log) == 400
+    for column in ("robot_x", "robot_y", "rho", "alpha"):
+        np.testing.assert_allclose(log[column], direct[column], atol=1e-6)
+
+
+def test_point_detections_follow_the_person():
+    """PointStamped detections (positions only): the tracker estimates the motion itself."""
+    _, log, _, _ = lockstep("realistic", "point", 30.0)
+    m = metrics.compute(log)
+    assert m["rmse_rho_m"] < 0.2
+    assert m["min_person_distance_m"] > 0.6
+
+
+def odom(t: float, x: float, y: float, theta: float, v: float = 0.0, w: float = 0.0):
+    return convert.odometry_msg(t, Pose(x, y, theta), (v, w), "odom", "base_link")
+
+
+def person(t: float, x: float, y: float, frame: str = "odom"):
+    return convert.person_msg([convert.Stamped(t, x, y, frame)], "point", t, frame)
+
+
+def node_on_bus(**ros):
+    bus, transport = graph()
+    node = CompanionNode(config_from_mapping({"ros": {"topics": {"scan": ""}, **ros}}),
+                         transport())
+    pub = transport()
+    return bus, node, pub.publisher("/odom", "nav_msgs/msg/Odometry"), \
+        pub.publisher("/person", "geometry_msgs/msg/PointStamped")
+
+
+def statuses(bus):
+    ts = typestore()
+    return [ts.deserialize_cdr(data, kind).status[0] for topic, kind, data in bus.sent
+            if topic == "/companion/status"]
+
+
+def test_stale_odometry_stops_the_robot_and_fresh_odometry_resumes():
+    bus, node, send_odom, send_person = node_on_bus()
+    t = 0.0
+    for k in range(40):                       # 2 s of a person walking ahead-left, odometry fresh
+        t = 100.0 + 0.05 * k
+        send_odom(odom(t, 0.05 * k, 0.0, 0.0, 1.0))
+        send_person(person(t, 0.05 * k + 0.3, 1.0))
+        cmd = node.tick(t)
+    assert cmd.status == "ok", cmd.reason
+    for k in range(40, 60):                   # odometry stops, detections go on
+        t = 100.0 + 0.05 * k
+        send_person(person(t, 0.05 * k + 0.3, 1.0))
+        cmd = node.tick(t)
+    assert cmd.status == "stopped" and cmd.reason.startswith("odometry_stale")
+    assert cmd.v == pytest.approx(0.0, abs=1e-9)
+    last = statuses(bus)[-1]
+    assert last.level == 2 and last.message.startswith("odometry_stale")
+    for k in range(60, 80):                   # odometry back
+        t = 100.0 + 0.05 * k
+        send_odom(odom(t, 2.0, 0.0, 0.0))
+        send_person(person(t, 0.05 * k + 0.3, 1.0))
+        cmd = node.tick(t)
+    assert "odometry_stale" not in cmd.reason and cmd.status != "stopped"
+
+
+def test_no_scan_for_longer_than_its_timeout_stops_the_robot():
+    bus, transport = graph()
+    node = CompanionNode(config_from_mapping({"ros": {"scan_timeout_s": 0.3}}), transport())
+    pub = transport()
+    send_odom = pub.publisher("/odom", "nav_msgs/msg/Odometry")
+    send_scan = pub.publisher("/scan", "sensor_msgs/msg/LaserScan")
+    send_person = pub.publisher("/person", "geometry_msgs/msg/PointStamped")
+    scan = convert.scan_msg
+
+    empty = Scan(np.linspace(-1.5, 1.5, 61), np.full(61, np.inf), 0.0, 0.0, 0.0, 0.05, 10.0)
+    reasons = []
+    for k in range(30):
+        t = 5.0 + 0.05 * k
+        send_odom(odom(t, 0.0, 0.0, 0.0))
+        send_person(person(t, 0.0, 1.0))
+        if k < 10:
+            send_scan(scan(t, empty, "laser", 0.1))
+        reasons.append(node.tick(t).reason)
+    assert "scan_stale" not in reasons[9]
+    assert all("scan_stale" in r for r in reasons[17:])    # 0.3 s after the last scan at 5.45
+
+
+def test_robot_frame_detections_are_placed_with_the_odometry_pose_at_their_stamp():
+    """The robot drives along +y (heading pi/2) at 1 m/s; a person 1 m ahead in base_link,
+    seen at a stamp between two odometry samples, is at the interpolated pose + 1 m."""
+    bus, node, send_odom, send_person = node_on_bus()
+    for k in range(11):
+        t = 10.0 + 0.1 * k
+        send_odom(odom(t, 0.0, 0.1 * k, math.pi / 2, 1.0))
+    d = node._detection(convert.Stamped(10.55, 1.0, 0.0, "base_link"), node._odom)
+    assert (d.x, d.y, d.frame) == (pytest.approx(0.0, abs=1e-9), pytest.approx(1.55),
+                                   "world")
+    unknown = node._detection(convert.Stamped(10.55, 1.0, 0.0, "camera"), node._odom)
+    assert unknown.frame == "camera"          # the tracker rejects it (detection_frame)
+
+
+def test_pose_at_interpolates_between_samples_across_the_angle_seam():
+    from collections import deque
+    a = convert.OdometrySample(0.0, Pose(0.0, 0.0, math.pi - 0.1), (0.0, 0.0))
+    b = convert.OdometrySample(1.0, Pose(1.0, 2.0, -math.pi + 0.1), (0.0, 0.0))
+    mid = pose_at(deque([a, b]), 0.5)
+    assert (mid.x, mid.y) == (pytest.approx(0.5), pytest.approx(1.0))
+    assert abs(abs(mid.theta) - math.pi) < 1e-9
+    ahead = pose_at(deque([convert.OdometrySample(0.0, Pose(0, 0, 0), (1.0, 0.0))]), 0.2)
+    assert ahead.x == pytest.approx(0.2)
+    assert pose_at(deque(), 0.0) is None
+
+
+def test_spin_ends_with_a_zero_velocity():
+    bus, node, send_odom, _ = node_on_bus()
+    stop = threading.Event()
+    threading.Timer(0.3, stop.set).start()
+    ticks = spin(node, stop)
+    assert ticks >= 3
+    ts = typestore()
+    cmds = [ts.deserialize_cdr(d, k) for topic, k, d in bus.sent if topic == "/cmd_vel"]
+    assert len(cmds) == ticks + 1
+    assert (cmds[-1].linear.x, cmds[-1].angular.z) == (0.0, 0.0)
+
+
+def test_person_odometry_round_trip_keeps_what_was_measured():
+    full = convert.Stamped(3.5, 1.0, 2.0, "odom", (0.01, 0.002, 0.002, 0.04), 0.3, 0.1, 1.2,
+                           0.2, (0.05, 0.06))
+    part = convert.Stamped(3.5, 1.0, 2.0, "odom")
+    ts = typestore()
+    for p in (full, part):
+        msg = convert.person_msg([p], "odometry", p.t, p.frame)
+        back = convert.people_from(ts.deserialize_cdr(ts.serialize_cdr(
+            msg, "nav_msgs/msg/Odometry"), "nav_msgs/msg/Odometry"), "odometry")[0]
+        for got, want in zip(back, p):
+            assert got == pytest.approx(want) if want is not None else got is None
+
+
+def test_stamps_round_trip_to_the_nanosecond():
+    for t in (0.0, 1.5, 1_764_000_000.123456789, 0.999_999_999_6):
+        assert convert.seconds(convert.time_msg(t)) == pytest.approx(t, abs=1e-9)
+        assert 0 <= convert.time_msg(t).nanosec < 1_000_000_000
