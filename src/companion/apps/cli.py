@@ -9,6 +9,7 @@ ends quietly.
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import signal
 import sys
@@ -150,7 +151,50 @@ def parser() -> argparse.ArgumentParser:
     bn.add_argument("--out", metavar="FILE", help="also write the JSON figures to FILE")
     _workers(bn)
     bn.set_defaults(func="cmd_bench")
+    _ros_commands(sub)
     return ap
+
+
+def _transport(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--transport", choices=("dds", "zenoh"),
+                   help="ROS 2 wire protocol (default: the parameters' ros.transport, dds)")
+    p.add_argument("--zenoh-connect", metavar="ENDPOINT",
+                   help="Zenoh router to connect to (default tcp/127.0.0.1:7447)")
+    p.add_argument("--domain-id", type=int, metavar="N",
+                   help="ROS_DOMAIN_ID in [0, 232] (default: the parameters', 0)")
+
+
+def _ros_commands(sub) -> None:
+    nd = sub.add_parser("node", help="the controller as a ROS 2 node: /odom, /scan, /person in, "
+                        "/cmd_vel out (docs/ros.md)")
+    nd.add_argument("--params", metavar="FILE", help="ROS 2 parameters YAML "
+                    "(companion: ros__parameters: ...)")
+    nd.add_argument("--controller", choices=CONTROLLERS,
+                    help="controller (default: the parameters', lqr)")
+    nd.add_argument("--duration", metavar="S", help="stop after S s of the node's time, at "
+                    "most 86400 (default: run until SIGINT or SIGTERM)")
+    _transport(nd)
+    nd.set_defaults(func="rosapps.cmd_node")
+
+    sr = sub.add_parser("sim-robot", help="the simulator as a ROS 2 robot: /odom, /scan, "
+                        "/person, /tf, /clock out, /cmd_vel in (docs/ros.md)")
+    sr.add_argument("scenario", help="built-in scenario name or a TOML file")
+    sr.add_argument("--ros-params", metavar="FILE", help="ROS 2 parameters YAML (its ros "
+                    "section: topics, frames, transport)")
+    sr.add_argument("--person-type", choices=("point", "pose", "pose_array", "odometry"),
+                    help="message type of the person detections (default: point)")
+    sr.add_argument("--rate", metavar="X", help="real-time factor in (0, 100]; other than 1 "
+                    "publishes /clock (use_sim_time) (default 1)")
+    sr.add_argument("--wait", default="10", metavar="S", help="wait up to S s (at most 3600) "
+                    "for the node's first command before starting (default 10)")
+    sr.add_argument("--duration", metavar="S", help="simulated time in s, at most 86400")
+    sr.add_argument("--seed", type=int, metavar="N", help="sensing noise seed >= 0")
+    sr.add_argument("--out", metavar="DIR", help="output folder (default "
+                    "out/sim-robot-SCENARIO)")
+    _sensing(sr)
+    _transport(sr)
+    sr.set_defaults(func="rosapps.cmd_sim_robot", controller=None, side=None, bearing=None,
+                    distance=None, start=None, person_csv=None, params=None, obstacles=None)
 
 
 class Terminated(BaseException):
@@ -173,6 +217,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         # The controller's matrices are 5x5: BLAS threads only cost hand-over time.
         with threadpool_limits(limits=1):
+            if "." in args.func:    # a command of another module: "module.function"
+                module, _, name = args.func.partition(".")
+                commands = importlib.import_module(f"companion.apps.{module}")
+                return getattr(commands, name)(args)
             return getattr(commands, args.func)(args)
     except CompanionError as exc:
         print(f"companion: error: {exc}", file=sys.stderr)

@@ -27,9 +27,14 @@ from companion.sim.sensing import LidarPerception
 from companion.types import Command, Log, Observation
 
 
+class Interrupted(Exception):
+    """The run was stopped (SIGINT, SIGTERM) before its end."""
+
+
 class Pacer:
     """Holds a simulation to the system clock: sample time ``t`` happens ``t / rate`` s after
-    the start (``rate`` 0: as fast as possible)."""
+    the start (``rate`` 0: as fast as possible); raises :class:`Interrupted` once ``stop`` is
+    set."""
 
     def __init__(self, rate: float, stop: threading.Event | None = None):
         self.rate, self.stop = rate, stop or threading.Event()
@@ -40,6 +45,8 @@ class Pacer:
             self.start = time.monotonic()
         if self.rate > 0.0:
             self.stop.wait(max(0.0, self.start + t / self.rate - time.monotonic()))
+        if self.stop.is_set():
+            raise Interrupted
 
 
 class WireRobot:
@@ -78,6 +85,21 @@ class WireRobot:
             with self._lock:
                 self._received = (v, w)
                 self.commands += 1
+
+    def wait_for_node(self, timeout: float) -> bool:
+        """Wait up to ``timeout`` s for a first /cmd_vel (with ``use_sim_time``, /clock stays
+        at the start meanwhile, so the node can tick); True if one came."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if self._clock is not None:
+                self._clock(convert.clock_msg(self.epoch))
+            with self._lock:
+                if self.commands:
+                    self._received, self.commands = None, 0
+                    return True
+            if self.pacer.stop.wait(0.05):
+                raise Interrupted
+        return False
 
     def reset(self) -> None:
         self._base = (0.0, 0.0)
@@ -126,11 +148,14 @@ class WireRobot:
 
 
 def run_sim_robot(spec: EpisodeSpec, transport: Transport, ros: RosParams, pacer: Pacer,
-                  epoch: float = 0.0, after: Callable[[float], None] | None = None
-                  ) -> tuple[Log, WireRobot]:
-    """Run ``spec`` with its controller on the wire; the robot senses with a LiDAR (a ROS
-    robot publishes /scan). Returns the log and the robot (its command count)."""
+                  epoch: float = 0.0, after: Callable[[float], None] | None = None,
+                  wait_s: float = 0.0) -> tuple[Log, WireRobot]:
+    """Run ``spec`` with its controller on the wire, after waiting up to ``wait_s`` s for a
+    node's first command; the robot senses with a LiDAR (a ROS robot publishes /scan).
+    Returns the log and the robot (its count of commands received during the run)."""
     robot = WireRobot(transport, ros, spec.params, pacer, epoch, after)
+    if wait_s > 0.0:
+        robot.wait_for_node(wait_s)
     log = run_episode(robot, spec.person, spec.params, spec.duration, start=spec.start,
                       seed=spec.seed, obstacles=spec.obstacles,
                       perception=LidarPerception(spec.params), faults=spec.faults,

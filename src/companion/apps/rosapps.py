@@ -1,0 +1,134 @@
+"""``companion node`` and ``companion sim-robot``: the ROS 2 commands (docs/ros.md)."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import signal
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from companion import metrics
+from companion.apps.args import (
+    UsageError,
+    build_scenario,
+    duration_arg,
+    output_dir,
+    positive_arg,
+    seed_arg,
+)
+from companion.io import Outputs
+
+
+def _ros_overrides(ros, args: argparse.Namespace):
+    changes = {}
+    if args.transport:
+        changes["transport"] = args.transport
+    if args.zenoh_connect:
+        changes["zenoh_connect"] = args.zenoh_connect
+    if args.domain_id is not None:
+        if not 0 <= args.domain_id <= 232:
+            raise UsageError(f"--domain-id: expected an integer in [0, 232], "
+                             f"got {args.domain_id}")
+        changes["domain_id"] = args.domain_id
+    return dataclasses.replace(ros, **changes)
+
+
+class Stop(threading.Event):
+    """Set by SIGINT or SIGTERM; ``code`` is the exit code the signal asks for."""
+
+    code = 0
+
+
+@contextmanager
+def stop_on_signals() -> Iterator[Stop]:
+    """A :class:`Stop` set by SIGINT or SIGTERM (instead of their usual exceptions) inside."""
+    stop = Stop()
+
+    def handler(signum, frame) -> None:
+        stop.code = 128 + signum
+        stop.set()
+
+    before = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield stop
+    finally:
+        for s, old in before.items():
+            signal.signal(s, old)
+
+
+def cmd_node(args: argparse.Namespace) -> int:
+    from companion.ros.node import CompanionNode, spin
+    from companion.ros.settings import load_node_config
+    from companion.ros.wire import open_transport
+
+    config = load_node_config(args.params)
+    config = dataclasses.replace(config, ros=_ros_overrides(config.ros, args))
+    if args.controller:
+        config = dataclasses.replace(config, controller=args.controller)
+    limit = duration_arg(args.duration) if args.duration else None
+    transport = open_transport(config.ros)
+    try:
+        node = CompanionNode(config, transport)
+        r = config.ros
+        print(f"companion node: {config.controller} at {1 / config.params.dt:g} Hz over "
+              f"{r.transport} (domain {r.domain_id}); {r.topics.odom}, "
+              f"{r.topics.scan or 'no scan'}, {r.topics.person} in, {r.topics.cmd_vel} out",
+              flush=True)
+        with stop_on_signals() as stop:
+            ticks = spin(node, stop, limit)
+        print(f"companion node: stopped after {ticks} periods; sent a zero velocity",
+              flush=True)
+    finally:
+        transport.close()
+    return 0
+
+
+def cmd_sim_robot(args: argparse.Namespace) -> int:
+    from companion.apps.commands import _write_run, summary_lines
+    from companion.ros.settings import load_node_config
+    from companion.ros.sim_robot import Interrupted, Pacer, run_sim_robot
+    from companion.ros.wire import open_transport
+
+    sc = build_scenario(args)
+    ros = _ros_overrides(load_node_config(args.ros_params).ros, args)
+    if args.person_type:
+        ros = dataclasses.replace(ros, person_type=args.person_type)
+    rate = positive_arg(args.rate, "--rate") if args.rate else 1.0
+    if rate > 100:
+        raise UsageError(f"--rate: expected a real-time factor in (0, 100], got {args.rate}")
+    if rate != 1.0 and not ros.use_sim_time:
+        ros = dataclasses.replace(ros, use_sim_time=True)   # other rates need /clock
+    wait = positive_arg(args.wait, "--wait")
+    if wait > 3600:
+        raise UsageError(f"--wait: expected at most 3600 s, got {args.wait!r}")
+    if args.seed is not None:
+        sc = dataclasses.replace(sc, seed=seed_arg(args.seed))
+    out = output_dir(Path(args.out or Path("out") / f"sim-robot-{sc.name}"))
+    transport = open_transport(ros, "companion_sim_robot")
+    try:
+        with stop_on_signals() as stop:
+            pacer = Pacer(rate, stop)
+            epoch = 0.0 if ros.use_sim_time else time.time()
+            print(f"companion sim-robot: {sc.name}, {sc.duration:g} s at {rate:g}x real time "
+                  f"over {ros.transport} (domain {ros.domain_id}); waiting for a node on "
+                  f"{ros.topics.cmd_vel}", flush=True)
+            try:
+                log, robot = run_sim_robot(sc.episode(), transport, ros, pacer, epoch,
+                                           wait_s=wait)
+            except Interrupted:
+                print("companion sim-robot: interrupted; nothing written", flush=True)
+                return stop.code or 130
+    finally:
+        transport.close()
+    m = metrics.compute(log)
+    m.update(scenario=sc.name, controller="(over ROS 2)", commands_received=robot.commands)
+    with Outputs(out, "sim-robot") as stage:
+        written = _write_run(stage, sc, False, log, m)
+    print(f"companion sim-robot: {robot.commands} commands received in {len(log)} periods")
+    print("\n".join(summary_lines(m)))
+    print(f"wrote {', '.join(written)} in {out}")
+    return 0 if robot.commands else 1
