@@ -28,6 +28,11 @@ def _ros_overrides(ros, args: argparse.Namespace):
     if args.transport:
         changes["transport"] = args.transport
     if args.zenoh_connect:
+        from companion.ros.settings import endpoint_problem
+
+        problem = endpoint_problem(args.zenoh_connect)
+        if problem:
+            raise UsageError(f"--zenoh-connect: expected {problem}, got {args.zenoh_connect!r}")
         changes["zenoh_connect"] = args.zenoh_connect
     if args.domain_id is not None:
         if not 0 <= args.domain_id <= 232:

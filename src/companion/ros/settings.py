@@ -10,17 +10,16 @@ keys, wrong types and out-of-range values are one-line errors naming the file an
 from __future__ import annotations
 
 import dataclasses
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from companion.config import (
     Validated,
-    at_least_one,
     between,
     build,
     param,
-    positive,
     reject_unknown,
 )
 from companion.control import lookup, make_controller
@@ -28,6 +27,21 @@ from companion.errors import CompanionError, ConfigError
 from companion.params import Params, params_from_mapping
 from companion.ros.convert import PERSON_TYPES
 from companion.ros.messages import DISTROS
+
+
+def _node_name(name: str) -> str | None:
+    ok = re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name) is not None
+    return None if ok else "a ROS node name: letters, digits and _, not starting with a digit"
+
+
+def _namespace(name: str) -> str | None:
+    ok = re.fullmatch(r"/([A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*)?", name) is not None
+    return None if ok else "an absolute ROS namespace such as '/' or '/robot1'"
+
+
+def endpoint_problem(text: str) -> str | None:
+    ok = re.fullmatch(r"(tcp|udp|tls|quic|ws|unixsock-stream)/\S+", text) is not None
+    return None if ok else "a Zenoh endpoint such as 'tcp/127.0.0.1:7447'"
 
 
 def _topic(name: str) -> str | None:
@@ -54,18 +68,18 @@ class Topics(Validated):
 class RosParams(Validated):
     """How the node meets the ROS 2 graph (docs/ros.md)."""
 
-    node_name: str = param("companion", "", "the node's name")
-    namespace: str = param("/", "", "the node's namespace")
+    node_name: str = param("companion", "", "the node's name", _node_name)
+    namespace: str = param("/", "", "the node's namespace", _namespace)
     transport: str = param("dds", "", "wire protocol", choices=("dds", "zenoh"))
     distro: str = param("jazzy", "", "ROS 2 distribution of the message types and type "
                         "hashes", choices=tuple(DISTROS))
     domain_id: int = param(0, "", "ROS_DOMAIN_ID, in [0, 232]",
                            lambda n: None if 0 <= n <= 232 else "an integer in [0, 232]")
     zenoh_connect: str = param("tcp/127.0.0.1:7447", "", "Zenoh endpoint to connect to (the "
-                               "zenohd router of rmw_zenoh)")
+                               "zenohd router of rmw_zenoh)", endpoint_problem)
     use_sim_time: bool = param(False, "", "take time from /clock instead of the system clock")
-    person_type: str = param("point", "", "type of the person topic: PointStamped, PoseStamped "
-                             "or PoseArray", choices=tuple(PERSON_TYPES))
+    person_type: str = param("point", "", "type of the person topic: PointStamped, PoseStamped, "
+                             "PoseArray or Odometry (docs/ros.md)", choices=tuple(PERSON_TYPES))
     cmd_vel_stamped: bool = param(False, "", "publish TwistStamped instead of Twist")
     odom_frame: str = param("odom", "", "frame of the odometry pose and of world-frame "
                             "detections")
@@ -81,9 +95,11 @@ class RosParams(Validated):
                                   "(0, 10]", between(1e-3, 10.0, "s"))
     scan_reliable: bool = param(False, "", "subscribe to the scan reliably (default: best "
                                 "effort, as drivers publish it)")
-    history_depth: int = param(10, "", "QoS history depth of reliable topics", at_least_one)
+    history_depth: int = param(10, "", "QoS history depth of reliable topics, in [1, 1000]",
+                               lambda n: None if 1 <= n <= 1000 else "an integer in [1, 1000]")
     odometry_buffer_s: float = param(2.0, "s", "how much odometry is kept to place late "
-                                     "detections and scans", positive)
+                                     "detections and scans, in [0.1, 60]",
+                                     between(0.1, 60.0, "s"))
     topics: Topics = param(Topics(), "", "")
 
 
