@@ -10,7 +10,9 @@ from __future__ import annotations
 from functools import cache
 from typing import Any
 
+import numpy as np
 from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.store import Nodetype
 
 from companion.errors import ConfigError
 
@@ -38,3 +40,34 @@ def dds_type_name(msgtype: str) -> str:
 def type_hash(msgtype: str, distro: str = DEFAULT_DISTRO) -> str:
     """The message's RIHS01 type hash (``'RIHS01_<64 hex>'``), as Jazzy and later send it."""
     return typestore(distro).hash_rihs01(msgtype)
+
+
+def message(store: Any, msgtype: str, **fields: Any) -> Any:
+    """A ``msgtype`` message of typestore ``store`` with ``fields`` set and every other field at
+    its ROS default (zeros, empty strings and sequences, nested messages likewise), as rclpy
+    builds a message without arguments."""
+    defs = store.fielddefs[msgtype][1]
+    unknown = set(fields) - {name for name, _ in defs}
+    if unknown:
+        raise TypeError(f"{msgtype} has no field {', '.join(sorted(unknown))}")
+    return store.types[msgtype](**{name: fields[name] if name in fields else
+                                   _default(store, desc) for name, desc in defs})
+
+
+def _default(store: Any, desc: tuple) -> Any:
+    """The ROS default of one rosbags field description: numbers and booleans as numpy arrays
+    when in arrays or sequences, as rosbags' deserialiser gives them."""
+    kind, detail = desc
+    if kind == Nodetype.BASE:
+        return {"string": "", "wstring": "", "bool": False, "float32": 0.0,
+                "float64": 0.0}.get(detail[0], 0)
+    if kind == Nodetype.NAME:
+        return message(store, detail)
+    (subkind, subdetail), size = detail
+    if subkind == Nodetype.BASE and subdetail[0] not in ("string", "wstring"):
+        dtype = np.dtype({"bool": "bool", "byte": "uint8", "char": "uint8"}.get(
+            subdetail[0], subdetail[0]))
+        return np.zeros(size if kind == Nodetype.ARRAY else 0, dtype=dtype)
+    if kind == Nodetype.ARRAY:
+        return [_default(store, (subkind, subdetail)) for _ in range(size)]
+    return []
