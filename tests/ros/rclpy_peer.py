@@ -62,7 +62,7 @@ def main():
             last = now
             for pub, msg in publishers:
                 pub.publish(msg)
-            graph = read_graph(node, name, namespace, plan["listen"])
+            graph = read_graph(node, name, namespace, plan["listen"], plan["publish"])
         rclpy.spin_once(node, timeout_sec=0.02)
         if not done and select.select([sys.stdin], [], [], 0)[0]:
             done = sys.stdin.readline().strip() == "done"
@@ -75,8 +75,14 @@ def main():
     rclpy.shutdown()
 
 
-def read_graph(node, name, namespace, listened):
-    """What rclpy's graph API says about ``namespace/name`` and the topics it publishes."""
+def endpoint(info):
+    return {"node": info.node_name, "type": info.topic_type, "hash": str(info.topic_type_hash),
+            "reliability": info.qos_profile.reliability.name,
+            "durability": info.qos_profile.durability.name}
+
+
+def read_graph(node, name, namespace, listened, published):
+    """What rclpy's graph API says about ``namespace/name`` and the topics it shares with us."""
     graph = {"nodes": [list(n) for n in node.get_node_names_and_namespaces()]}
     if [name, namespace] not in graph["nodes"]:
         return graph
@@ -87,14 +93,10 @@ def read_graph(node, name, namespace, listened):
                                 node.get_subscriber_names_and_types_by_node(name, namespace)]
     except Exception as exc:  # the node left between the two calls
         graph["error"] = str(exc)
-    graph["endpoints"] = {}
-    for topic, _, _ in listened:
-        graph["endpoints"][topic] = [
-            {"node": info.node_name, "type": info.topic_type,
-             "hash": str(info.topic_type_hash),
-             "reliability": info.qos_profile.reliability.name,
-             "durability": info.qos_profile.durability.name}
-            for info in node.get_publishers_info_by_topic(topic)]
+    graph["writers"] = {topic: [endpoint(info) for info in node.get_publishers_info_by_topic(
+        topic)] for topic, *_ in listened}
+    graph["readers"] = {topic: [endpoint(info) for info in node.get_subscriptions_info_by_topic(
+        topic)] for topic, *_ in published}
     return graph
 
 

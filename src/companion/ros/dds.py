@@ -2,7 +2,8 @@
 
 Wire names are rmw's: the ROS topic ``/cmd_vel`` is the DDS topic ``rt/cmd_vel`` of type
 ``geometry_msgs::msg::dds_::Twist_``. Samples are rosbags' CDR (XCDR1, little endian), written
-and read as bytes, so what goes on the wire is exactly ``typestore.serialize_cdr``. Each reader
+and read as bytes, so what goes on the wire is ``typestore.serialize_cdr`` (with zeros to a
+multiple of 4 bytes, as rmw_cyclonedds_cpp sends it). Each reader
 and writer carries ``typehash=RIHS01_...;`` in its USER_DATA (as rmw implementations of Jazzy and
 later do), and the node announces itself on ``ros_discovery_info`` so ROS 2 tools list it.
 By default the participant is confined to the loopback interface with multicast off
@@ -148,6 +149,12 @@ class _Domains:
 _DOMAINS = _Domains()
 
 
+def padded(cdr: bytes) -> bytes:
+    """CDR bytes with zeros up to a multiple of 4, as rmw_cyclonedds_cpp sends them (cyclonedds
+    sends whole 4-byte words; unpadded, the last word's tail would be whatever memory held)."""
+    return bytes(cdr) + b"\0" * (-len(cdr) % 4)
+
+
 def gid(entity: Any) -> bytes:
     """The 16 bytes of an entity's DDS GUID, which rmw uses as its GID."""
     return entity.guid.bytes
@@ -199,7 +206,7 @@ class DdsTransport:
         serialize = self.typestore.serialize_cdr
 
         def publish(msg: Any) -> None:
-            code = ddspy_write(writer._ref, bytes(serialize(msg, msgtype)))
+            code = ddspy_write(writer._ref, padded(serialize(msg, msgtype)))
             if code < 0:
                 raise RuntimeError(f"DDS write of {msgtype} on {topic} failed (code {code})")
         return publish
@@ -297,6 +304,6 @@ class DdsTransport:
         info = message(store, DISCOVERY_TYPE, gid=as_gid(self.participant),
                        node_entities_info_seq=nodes)
         code = ddspy_write(self._discovery._ref,
-                           bytes(self.typestore.serialize_cdr(info, DISCOVERY_TYPE)))
+                           padded(self.typestore.serialize_cdr(info, DISCOVERY_TYPE)))
         if code < 0:
             raise RuntimeError(f"DDS write on {DISCOVERY_TOPIC} failed (code {code})")
