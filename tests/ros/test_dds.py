@@ -199,3 +199,15 @@ def test_names_and_settings_are_checked(ros_domain, monkeypatch):
         with pytest.raises(ConfigError, match="another configuration"):
             DdsTransport("b", domain_id=ros_domain, config=loopback_config().replace(
                 "auto", "none"))
+
+
+def test_cyclonedds_uri_replaces_the_loopback_default(ros_domain, monkeypatch, capfd):
+    """A user's CYCLONEDDS_URI is what the transport runs on (here one naming an interface this
+    machine lacks), and a configuration cyclonedds refuses is a ConfigError naming its source."""
+    monkeypatch.setenv("CYCLONEDDS_URI", loopback_config().replace('name="lo"', 'name="nosuch0"'))
+    with pytest.raises(ConfigError, match=f"CYCLONEDDS_URI: .* domain {ros_domain + 1}"):
+        DdsTransport("companion", domain_id=ros_domain + 1)
+    assert "nosuch0" in capfd.readouterr().err
+    with pytest.raises(ConfigError, match="dds_config: "):
+        DdsTransport("companion", domain_id=ros_domain + 2,
+                     config=loopback_config().replace('name="lo"', 'name="nosuch0"'))

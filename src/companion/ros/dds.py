@@ -21,7 +21,15 @@ from typing import Any
 
 import numpy as np
 from cyclonedds._clayer import ddspy_take, ddspy_write
-from cyclonedds.core import InstanceState, Listener, Policy, Qos, SampleState, ViewState
+from cyclonedds.core import (
+    DDSException,
+    InstanceState,
+    Listener,
+    Policy,
+    Qos,
+    SampleState,
+    ViewState,
+)
 from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
@@ -180,8 +188,10 @@ class DdsTransport:
         self.node_name, self.namespace = node_name, namespace.rstrip("/") or "/"
         self.typestore = typestore if typestore is not None else distro_typestore(distro)
         self.domain_id = ros_domain_id(domain_id)
-        if config is None and not os.environ.get("CYCLONEDDS_URI"):
-            config = loopback_config()
+        source = "dds_config"
+        if config is None:
+            source = "CYCLONEDDS_URI" if os.environ.get("CYCLONEDDS_URI") else "loopback"
+            config = None if source == "CYCLONEDDS_URI" else loopback_config()
         _DOMAINS.acquire(self.domain_id, config)
         self._lock = threading.RLock()
         self._topics: dict[str, tuple[str, Topic]] = {}
@@ -189,8 +199,13 @@ class DdsTransport:
         self._writers: list[DataWriter] = []
         self._closed = False
         try:
-            self.participant = DomainParticipant(
-                self.domain_id, qos=Qos(Policy.Userdata(data=b"enclave=/;")))
+            try:
+                self.participant = DomainParticipant(
+                    self.domain_id, qos=Qos(Policy.Userdata(data=b"enclave=/;")))
+            except DDSException as exc:
+                raise ConfigError(f"{source}: cyclonedds could not start a participant in domain "
+                                  f"{self.domain_id} with this configuration ({exc}; cyclonedds "
+                                  "names the setting on stderr)") from exc
             self._discovery = DataWriter(
                 self.participant, self._topic(DISCOVERY_TOPIC, DISCOVERY_TYPE),
                 qos=dds_qos(DISCOVERY_QOS, self._user_data(DISCOVERY_TYPE)))
