@@ -211,3 +211,18 @@ def test_cyclonedds_uri_replaces_the_loopback_default(ros_domain, monkeypatch, c
     with pytest.raises(ConfigError, match="dds_config: "):
         DdsTransport("companion", domain_id=ros_domain + 2,
                      config=loopback_config().replace('name="lo"', 'name="nosuch0"'))
+
+
+def test_humble_gids_are_24_bytes(ros_domain):
+    """Humble's rmw_dds_common has 24-byte GIDs: the 16-byte GUID and zeros, as its rmw fill it."""
+    from companion.ros.messages import typestore
+    humble = typestore("humble")
+    with DdsTransport("companion", domain_id=ros_domain, distro="humble",
+                      config=loopback_config()) as transport:
+        raw = DomainParticipant(ros_domain)
+        infos = DataReader(raw, Topic(raw, DISCOVERY_TOPIC, idl_type(humble, DISCOVERY_TYPE)),
+                           qos=LATCHED)
+        got = []
+        assert wait_for(lambda: got, step=lambda: got.extend(infos.take(4)))
+        assert bytes(got[-1].gid.data) == transport.participant.guid.bytes + b"\0" * 8
+        raw.__del__()

@@ -211,6 +211,8 @@ class DdsTransport:
                 qos=dds_qos(DISCOVERY_QOS, self._user_data(DISCOVERY_TYPE)))
             self._announce()
         except BaseException:
+            if hasattr(self, "participant"):
+                self.participant.__del__()
             _DOMAINS.release(self.domain_id)
             raise
 
