@@ -11,8 +11,8 @@ from functools import cache
 from typing import Any
 
 import numpy as np
-from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.store import Nodetype
 
 from companion.errors import ConfigError
 
@@ -42,37 +42,39 @@ def type_hash(msgtype: str, distro: str = DEFAULT_DISTRO) -> str:
     return typestore(distro).hash_rihs01(msgtype)
 
 
-_NUMPY = {"bool": np.bool_, "byte": np.uint8, "char": np.uint8, "int8": np.int8,
-          "uint8": np.uint8, "int16": np.int16, "uint16": np.uint16, "int32": np.int32,
-          "uint32": np.uint32, "int64": np.int64, "uint64": np.uint64, "float32": np.float32,
-          "float64": np.float64}
+def message(store: Any, msgtype: str, **fields: Any) -> Any:
+    """A ``msgtype`` message of typestore ``store`` with ``fields`` set and every other field at
+    its ROS default (zeros, empty strings and sequences, nested messages likewise), as rclpy
+    builds a message without arguments."""
+    if msgtype == "geometry_msgs/msg/Quaternion":   # the one default companion meets that a
+        fields.setdefault("w", 1.0)                 # .msg file sets itself (no rotation)
+    defs = store.fielddefs[msgtype][1]
+    unknown = set(fields) - {name for name, _ in defs}
+    if unknown:
+        raise TypeError(f"{msgtype} has no field {', '.join(sorted(unknown))}")
+    return store.types[msgtype](**{name: fields[name] if name in fields else
+                                   _default(store, desc) for name, desc in defs})
 
 
-def _default(node: tuple, distro: str) -> Any:
-    """The ROS 2 default of one field: 0, False, "", an empty or zeroed array, a message."""
-    kind, spec = node
+def _default(store: Any, desc: tuple) -> Any:
+    """The ROS default of one rosbags field description: numbers and booleans as numpy arrays
+    when in arrays or sequences, as rosbags' deserialiser gives them."""
+    kind, detail = desc
     if kind == Nodetype.BASE:
-        name = spec[0]
-        return "" if name == "string" else False if name == "bool" else \
-            0.0 if name.startswith("float") else 0
+        return {"string": "", "wstring": "", "bool": False, "float32": 0.0,
+                "float64": 0.0}.get(detail[0], 0)
     if kind == Nodetype.NAME:
-        return make(spec, distro)
-    (sub_kind, sub), size = spec
-    if sub_kind == Nodetype.BASE and sub[0] in _NUMPY:
-        return np.zeros(size if kind == Nodetype.ARRAY else 0, dtype=_NUMPY[sub[0]])
-    return [_default((sub_kind, sub), distro) for _ in range(size)] \
-        if kind == Nodetype.ARRAY else []
+        return message(store, detail)
+    (subkind, subdetail), size = detail
+    if subkind == Nodetype.BASE and subdetail[0] not in ("string", "wstring"):
+        dtype = np.dtype({"bool": "bool", "byte": "uint8", "char": "uint8"}.get(
+            subdetail[0], subdetail[0]))
+        return np.zeros(size if kind == Nodetype.ARRAY else 0, dtype=dtype)
+    if kind == Nodetype.ARRAY:
+        return [_default(store, (subkind, subdetail)) for _ in range(size)]
+    return []
 
 
 def make(msgtype: str, distro: str = DEFAULT_DISTRO, **fields: Any) -> Any:
-    """A ``msgtype`` message with ``fields`` set and every other field at its ROS 2 default
-    (what ``msg = Twist()`` gives in rclpy)."""
-    store = typestore(distro)
-    if msgtype == "geometry_msgs/msg/Quaternion":   # the one default companion meets that the
-        fields.setdefault("w", 1.0)                 # .msg file sets (w = 1: no rotation)
-    defs = store.fielddefs[msgtype][1]
-    values = {name: fields.pop(name) if name in fields else _default(node, distro)
-              for name, node in defs}
-    if fields:   # a programming error: a field the message does not have
-        raise TypeError(f"{msgtype} has no field(s) {', '.join(fields)}")
-    return store.types[msgtype](**values)
+    """:func:`message` of the typestore of ``distro`` (what companion's conversions use)."""
+    return message(typestore(distro), msgtype, **fields)
