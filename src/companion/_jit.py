@@ -18,6 +18,8 @@ for the whole process and its children.
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import functools
 import hashlib
 import os
@@ -25,6 +27,7 @@ import shutil
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent
@@ -108,3 +111,24 @@ def install() -> None:
         import numba.core.config
 
         numba.core.config.CACHE_DIR = str(path)
+
+
+@contextlib.contextmanager
+def compile_lock() -> Iterator[None]:
+    """Hold an exclusive lock on the cache directory while the kernels are first loaded or
+    compiled: two processes started together (``companion node`` and ``companion sim-robot``)
+    would otherwise compile the same kernel at once, and numba can fail saving it ("no
+    compiled object yet"). The second process then loads what the first saved."""
+    path = Path(os.environ.get("NUMBA_CACHE_DIR") or cache_dir())
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        fh = open(path / ".compile.lock", "a+b")
+    except OSError:              # an unwritable cache: numba does not save, nothing to guard
+        yield
+        return
+    with fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)

@@ -69,12 +69,14 @@ def cmd_node(args: argparse.Namespace) -> int:
     from companion.ros.node import CompanionNode, spin
     from companion.ros.settings import load_node_config
     from companion.ros.wire import open_transport
+    from companion.sim.runner import warm_up
 
     config = load_node_config(args.params)
     config = dataclasses.replace(config, ros=_ros_overrides(config.ros, args))
     if args.controller:
         config = dataclasses.replace(config, controller=args.controller)
     limit = duration_arg(args.duration) if args.duration else None
+    warm_up()                      # compile or load the kernels before the first period
     transport = open_transport(config.ros)
     try:
         node = CompanionNode(config, transport)
@@ -97,6 +99,7 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
     from companion.ros.settings import load_node_config
     from companion.ros.sim_robot import Interrupted, Pacer, run_sim_robot
     from companion.ros.wire import open_transport
+    from companion.sim.runner import warm_up
 
     sc = build_scenario(args)
     ros = _ros_overrides(load_node_config(args.ros_params).ros, args)
@@ -113,6 +116,7 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
     if args.seed is not None:
         sc = dataclasses.replace(sc, seed=seed_arg(args.seed))
     out = output_dir(Path(args.out or Path("out") / f"sim-robot-{sc.name}"))
+    warm_up()
     transport = open_transport(ros, "companion_sim_robot")
     try:
         with stop_on_signals() as stop:

@@ -20,15 +20,15 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
 
+from companion._jit import compile_lock
 from companion.control import make_controller
-from companion.control.keepout import evasive_target
 from companion.errors import ConfigError
 from companion.params import Params
 from companion.sim.episode import run_episode
 from companion.sim.faults import Fault
-from companion.sim.person import PersonMotion
+from companion.sim.person import PersonMotion, line
 from companion.sim.sensing import make_perception
-from companion.types import Log, Obstacle, PersonState, Pose
+from companion.types import Circle, Log, Obstacle, Pose
 
 
 @dataclass(frozen=True)
@@ -67,11 +67,11 @@ def default_workers() -> int:
 
 def warm_up() -> None:
     """Load (or compile) the compiled kernels of the stack in this process, so that worker
-    processes forked from it inherit them instead of each loading them."""
-    params = Params()
-    make_controller("lqr", params)
-    evasive_target(Pose(0.0, 0.0, 0.0), (0.0, 0.0), (0.0, 0.0),
-                   PersonState(0.6, 0.0, 0.0, 0.0, 0.0), (), params)
+    processes forked from it inherit them instead of each loading them: a few steps of the
+    full stack with an obstacle and a LiDAR, under the cache's compile lock."""
+    with compile_lock():
+        run_one(EpisodeSpec("lqr", line((0.0, 0.0, 0.0), 1.0), Params(), 0.2,
+                            obstacles=(Circle(1.5, 1.2, 0.3),), obstacle_source="lidar"))
 
 
 def _run(spec: EpisodeSpec, summarize: Callable[[Log], Any] | None) -> Any:
