@@ -119,7 +119,8 @@ class ZenohTransport:
         ``topic``, as an rmw_zenoh subscription (src/detail/rmw_subscription_data.cpp): on the
         topic's key expression, which holds the type hash, so only publishers of the same type
         definition match; transient local subscriptions ask publishers for their cache. A sample
-        that does not decode is counted in :attr:`dropped` and logged, never raised."""
+        that does not decode is counted in :attr:`dropped` and logged, and so is an exception
+        of ``callback``: neither is raised on the Zenoh thread."""
         entity = self._entity(wire.SUBSCRIPTION, topic, msgtype, qos)
         key = wire.topic_keyexpr(self.domain_id, topic, msgtype, entity.type_hash)
         deserialize = self.typestore.deserialize_cdr
@@ -128,11 +129,15 @@ class ZenohTransport:
             try:
                 msg = deserialize(sample.payload.to_bytes(), msgtype)
             except Exception as exc:  # a malformed sample must not kill the Zenoh thread
-                self.dropped += 1
+                with self._lock:
+                    self.dropped += 1
                 log.warning("zenoh: dropped a sample on %s that is not a %s: %s",
                             sample.key_expr, msgtype, exc)
                 return
-            callback(msg)
+            try:
+                callback(msg)
+            except Exception:  # nobody up this thread to raise to: log it
+                log.exception("zenoh: the callback of %s raised", topic)
 
         if qos.transient_local:
             history = zenoh.ext.HistoryConfig(detect_late_publishers=True,
