@@ -345,3 +345,24 @@ def test_two_processes_exchange_twist(port, listener):
             child.kill()
             child.wait(timeout=5)
     assert got[0].linear.x == pytest.approx(0.7) and got[0].angular.z == pytest.approx(0.2)
+
+
+def test_through_a_router_as_rmw_zenoh_deploys(port):
+    """rmw_zenoh's topology: a router (here a Zenoh session in router mode, as rmw_zenohd is)
+    that both nodes connect to; gossip then connects the two nodes to each other directly."""
+    config = zenoh.Config()
+    for key, value in {"mode": "router", "listen/endpoints": [f"tcp/127.0.0.1:{port}"],
+                       "scouting/multicast/enabled": False}.items():
+        config.insert_json5(key, json.dumps(value))
+    router = zenoh.open(config)
+    try:
+        with ZenohTransport("a", connect=[f"tcp/127.0.0.1:{port}"]) as a, \
+                ZenohTransport("b", connect=[f"tcp/127.0.0.1:{port}"]) as b:
+            got, event = [], threading.Event()
+            b.subscribe("/cmd_vel", TWIST, lambda m: (got.append(m), event.set()))
+            publish = a.publisher("/cmd_vel", TWIST)
+            assert until(event.is_set, lambda: publish(MESSAGES[TWIST]))
+            assert [str(z) for z in b.session.info.routers_zid()] == [str(router.zid())]
+            assert until(lambda: a.zid in [str(z) for z in b.session.info.peers_zid()])
+    finally:
+        router.close()

@@ -119,8 +119,8 @@ class ZenohTransport:
         ``topic``, as an rmw_zenoh subscription (src/detail/rmw_subscription_data.cpp): on the
         topic's key expression, which holds the type hash, so only publishers of the same type
         definition match; transient local subscriptions ask publishers for their cache. A sample
-        that does not decode is counted in :attr:`dropped` and logged, and so is an exception
-        of ``callback``: neither is raised on the Zenoh thread."""
+        that does not decode is counted in :attr:`dropped` and logged; an exception from
+        ``callback`` is logged; neither is raised on the Zenoh thread."""
         entity = self._entity(wire.SUBSCRIPTION, topic, msgtype, qos)
         key = wire.topic_keyexpr(self.domain_id, topic, msgtype, entity.type_hash)
         deserialize = self.typestore.deserialize_cdr
