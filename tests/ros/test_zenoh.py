@@ -347,22 +347,53 @@ def test_two_processes_exchange_twist(port, listener):
     assert got[0].linear.x == pytest.approx(0.7) and got[0].angular.z == pytest.approx(0.2)
 
 
-def test_through_a_router_as_rmw_zenoh_deploys(port):
-    """rmw_zenoh's topology: a router (here a Zenoh session in router mode, as rmw_zenohd is)
-    that both nodes connect to; gossip then connects the two nodes to each other directly."""
+@pytest.fixture
+def router(port):
+    """A Zenoh router on loopback (a session in router mode, as rmw_zenohd is)."""
     config = zenoh.Config()
     for key, value in {"mode": "router", "listen/endpoints": [f"tcp/127.0.0.1:{port}"],
                        "scouting/multicast/enabled": False}.items():
         config.insert_json5(key, json.dumps(value))
-    router = zenoh.open(config)
-    try:
-        with ZenohTransport("a", connect=[f"tcp/127.0.0.1:{port}"]) as a, \
-                ZenohTransport("b", connect=[f"tcp/127.0.0.1:{port}"]) as b:
-            got, event = [], threading.Event()
-            b.subscribe("/cmd_vel", TWIST, lambda m: (got.append(m), event.set()))
-            publish = a.publisher("/cmd_vel", TWIST)
-            assert until(event.is_set, lambda: publish(MESSAGES[TWIST]))
-            assert [str(z) for z in b.session.info.routers_zid()] == [str(router.zid())]
-            assert until(lambda: a.zid in [str(z) for z in b.session.info.peers_zid()])
-    finally:
-        router.close()
+    session = zenoh.open(config)
+    yield session
+    session.close()
+
+
+def exchanges(src: ZenohTransport, dst: ZenohTransport, topic: str) -> bool:
+    got, event = [], threading.Event()
+    dst.subscribe(topic, TWIST, lambda m: (got.append(m), event.set()))
+    publish = src.publisher(topic, TWIST)
+    return until(event.is_set, lambda: publish(MESSAGES[TWIST])) and \
+        got[0].linear.x == pytest.approx(0.4)
+
+
+def test_through_a_router_as_rmw_zenoh_deploys(port, router):
+    """rmw_zenoh's topology: both nodes connect to the router, gossip then connects them to
+    each other directly."""
+    with ZenohTransport("a", connect=[f"tcp/127.0.0.1:{port}"]) as a, \
+            ZenohTransport("b", connect=[f"tcp/127.0.0.1:{port}"]) as b:
+        assert exchanges(a, b, "/cmd_vel")
+        assert [str(z) for z in b.session.info.routers_zid()] == [str(router.zid())]
+        assert until(lambda: a.zid in [str(z) for z in b.session.info.peers_zid()])
+
+
+def test_client_reaches_peers_that_listen_nowhere_through_the_router(port, router):
+    """A peer that cannot be reached directly (here: listening nowhere; on a robot: listening
+    on its own loopback) still talks to a client, through the router, both ways."""
+    with ZenohTransport("robot", connect=[f"tcp/127.0.0.1:{port}"], listen=[]) as robot, \
+            ZenohTransport("companion", connect=[f"tcp/127.0.0.1:{port}"],
+                           mode="client") as node:
+        assert node.listen == []
+        assert exchanges(node, robot, "/cmd_vel")
+        assert exchanges(robot, node, "/odom_twist")
+        assert list(node.session.info.peers_zid()) == []
+
+
+def test_client_without_router_fails_in_bounded_time(monkeypatch, port):
+    monkeypatch.setattr(wire, "CLIENT_CONNECT_TIMEOUT_MS", 300)
+    start = time.monotonic()
+    with pytest.raises(ConnectionError, match=f"tcp/127.0.0.1:{port}"):
+        ZenohTransport(connect=[f"tcp/127.0.0.1:{port}"], mode="client")
+    assert time.monotonic() - start < 3.0
+    with pytest.raises(ConfigError, match="zenoh mode"):
+        ZenohTransport(connect=[], mode="router")

@@ -148,22 +148,34 @@ def parse_attachment(data: bytes) -> tuple[int, int, bytes]:
     return seq, stamp, bytes(data[17:])
 
 
-def session_config(connect: list[str], listen: list[str]) -> dict[str, Any]:
+#: Zenoh modes companion's session can take: ``peer`` (rmw_zenoh's: talks to the router and,
+#: once gossip has introduced them, straight to the other nodes) or ``client`` (everything
+#: through the router; opens no listening socket).
+MODES = ("peer", "client")
+#: How long a client waits for its router before giving up, ms.
+CLIENT_CONNECT_TIMEOUT_MS = 5000
+
+
+def session_config(connect: list[str], listen: list[str], mode: str = "peer") -> dict[str, Any]:
     """Zenoh session settings (key path -> JSON value) as rmw_zenoh's
     config/DEFAULT_RMW_ZENOH_SESSION_CONFIG.json5 sets them, with our endpoints.
 
-    A peer; connects to ``connect`` (retrying every 1-4 s in the background while a router is
-    not up, as rmw_zenoh does) and listens on ``listen``; multicast scouting off, gossip
-    scouting through the router on; no shared memory; samples timestamped.
+    A peer connects to ``connect`` (retrying every 1-4 s in the background while a router is
+    not up, as rmw_zenoh does) and listens on ``listen``; a client listens nowhere and fails
+    after :data:`CLIENT_CONNECT_TIMEOUT_MS` without a router. Both: multicast scouting off,
+    gossip scouting through the router on, no shared memory, samples timestamped.
     """
+    if mode not in MODES:
+        raise ConfigError(f"zenoh mode: {mode!r} is not allowed; allowed: {', '.join(MODES)}")
+    peer = mode == "peer"
     return {
-        "mode": "peer",
+        "mode": mode,
         "connect/endpoints": connect,
-        "connect/timeout_ms": -1,
-        "connect/exit_on_failure": False,
+        "connect/timeout_ms": -1 if peer else CLIENT_CONNECT_TIMEOUT_MS,
+        "connect/exit_on_failure": not peer,
         "connect/retry": {"period_init_ms": 1000, "period_max_ms": 4000,
                           "period_increase_factor": 2},
-        "listen/endpoints": listen,
+        "listen/endpoints": listen if peer else [],
         "listen/exit_on_failure": True,
         "scouting/multicast/enabled": False,
         "scouting/gossip/enabled": True,

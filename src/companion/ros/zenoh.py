@@ -35,12 +35,18 @@ log = logging.getLogger(__name__)
 _HEARTBEAT_MS = 500
 
 
-def open_session(connect: list[str], listen: list[str]) -> zenoh.Session:
-    """A Zenoh session with rmw_zenoh's default settings and these endpoints."""
+def open_session(connect: list[str], listen: list[str], mode: str = "peer") -> zenoh.Session:
+    """A Zenoh session with rmw_zenoh's default settings and these endpoints; a
+    ``ConnectionError`` naming the endpoints if a client finds no router."""
     config = zenoh.Config()
-    for key, value in wire.session_config(connect, listen).items():
+    for key, value in wire.session_config(connect, listen, mode).items():
         config.insert_json5(key, json.dumps(value))
-    return zenoh.open(config)
+    try:
+        return zenoh.open(config)
+    except zenoh.ZError as exc:
+        raise ConnectionError(f"zenoh: cannot open a {mode} session connecting to "
+                              f"{', '.join(connect) or 'nothing'} and listening on "
+                              f"{', '.join(listen) or 'nothing'}: {exc}") from exc
 
 
 class ZenohTransport:
@@ -57,17 +63,22 @@ class ZenohTransport:
         (``tcp/127.0.0.1:7447``). An absent router is retried in the background.
     listen
         Endpoints this session accepts peers on; ``None``: the loopback interface, any port.
+    mode
+        ``"peer"`` (rmw_zenoh's) or ``"client"``: all traffic through the router of
+        ``connect``, no listening socket; for a router on another computer whose nodes
+        listen on their own loopback only (rmw_zenoh's default), which a peer cannot reach.
     """
 
     def __init__(self, node_name: str = "companion", namespace: str = "/", domain_id: int = 0,
                  distro: str = DEFAULT_DISTRO, connect: list[str] | None = None,
-                 listen: list[str] | None = None, enclave: str = "/"):
+                 listen: list[str] | None = None, enclave: str = "/", mode: str = "peer"):
         wire.check_names(node_name, namespace)
         self.typestore = typestore(distro)
         self.distro, self.domain_id = distro, domain_id
         self.connect = [wire.DEFAULT_ROUTER] if connect is None else list(connect)
-        self.listen = [wire.DEFAULT_LISTEN] if listen is None else list(listen)
-        self.session = open_session(self.connect, self.listen)
+        self.listen = ([] if mode == "client" else [wire.DEFAULT_LISTEN] if listen is None
+                       else list(listen))
+        self.session = open_session(self.connect, self.listen, mode)
         self.zid = str(self.session.zid())
         self._lock = threading.Lock()
         self._closed = False
