@@ -17,3 +17,7 @@ class ConfigError(CompanionError):
 
 class DataError(CompanionError):
     """A data file (for example a person CSV) is malformed."""
+
+
+class TransportError(CompanionError):
+    """A ROS 2 transport (DDS, Zenoh) could not start: a port in use, no router to reach."""

@@ -117,7 +117,7 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
         sc = dataclasses.replace(sc, seed=seed_arg(args.seed))
     out = output_dir(Path(args.out or Path("out") / f"sim-robot-{sc.name}"))
     warm_up()
-    transport = open_transport(ros, "companion_sim_robot")
+    transport = open_transport(ros, "companion_sim_robot", robot=True)
     try:
         with stop_on_signals() as stop:
             pacer = Pacer(rate, stop)

@@ -150,8 +150,9 @@ def parse_attachment(data: bytes) -> tuple[int, int, bytes]:
 
 #: Zenoh modes companion's session can take: ``peer`` (rmw_zenoh's: talks to the router and,
 #: once gossip has introduced them, straight to the other nodes) or ``client`` (everything
-#: through the router; opens no listening socket).
-MODES = ("peer", "client")
+#: through the router; opens no listening socket) or ``router`` (what rmw_zenohd is: listens
+#: on ``listen`` and routes between the nodes; ``companion sim-robot`` plays the robot so).
+MODES = ("peer", "client", "router")
 #: How long a client waits for its router before giving up, ms.
 CLIENT_CONNECT_TIMEOUT_MS = 5000
 
@@ -167,7 +168,7 @@ def session_config(connect: list[str], listen: list[str], mode: str = "peer") ->
     """
     if mode not in MODES:
         raise ConfigError(f"zenoh mode: {mode!r} is not allowed; allowed: {', '.join(MODES)}")
-    peer = mode == "peer"
+    peer = mode != "client"
     return {
         "mode": mode,
         "connect/endpoints": connect,
