@@ -396,4 +396,4 @@ def test_client_without_router_fails_in_bounded_time(monkeypatch, port):
         ZenohTransport(connect=[f"tcp/127.0.0.1:{port}"], mode="client")
     assert time.monotonic() - start < 3.0
     with pytest.raises(ConfigError, match="zenoh mode"):
-        ZenohTransport(connect=[], mode="router")
+        ZenohTransport(connect=[], mode="routr")
