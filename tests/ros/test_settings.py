@@ -74,3 +74,14 @@ def test_bad_parameters_are_one_line_naming_the_file_and_key(tmp_path, text, exp
 def test_a_missing_file_is_named(tmp_path):
     with pytest.raises(ConfigError, match="no such file"):
         load_node_config(tmp_path / "nope.yaml")
+
+
+def test_docs_list_every_node_parameter():
+    from pathlib import Path
+
+    from companion.config import field_docs
+    from companion.ros.settings import RosParams
+
+    text = (Path(__file__).parents[2] / "docs" / "ros.md").read_text()
+    missing = [k for k, *_ in field_docs(RosParams) if f"`ros.{k}`" not in text]
+    assert not missing

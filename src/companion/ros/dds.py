@@ -7,7 +7,7 @@ multiple of 4 bytes, as rmw_cyclonedds_cpp sends it). Each reader
 and writer carries ``typehash=RIHS01_...;`` in its USER_DATA (as rmw implementations of Jazzy and
 later do), and the node announces itself on ``ros_discovery_info`` so ROS 2 tools list it.
 By default the participant is confined to the loopback interface with multicast off
-(:func:`loopback_config`); docs/ros.md says how to open it to a robot's network.
+(:func:`loopback_config`); docs/ros-dds.md says how to open it to a robot's network.
 """
 
 from __future__ import annotations
