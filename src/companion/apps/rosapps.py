@@ -1,4 +1,5 @@
-"""``companion node`` and ``companion sim-robot``: the ROS 2 commands (docs/ros.md)."""
+"""``companion node``, ``companion sim-robot`` and ``companion replay``: the ROS 2 commands
+(docs/ros.md, docs/recording.md); ``--bag`` of these and of ``companion run``."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import signal
 import threading
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 
 from companion import metrics
@@ -20,7 +21,7 @@ from companion.apps.args import (
     positive_arg,
     seed_arg,
 )
-from companion.io import Outputs
+from companion.io import Outputs, write_json
 
 
 def _ros_overrides(ros, args: argparse.Namespace):
@@ -60,19 +61,67 @@ def stop_on_signals() -> Iterator[Stop]:
             signal.signal(s, old)
 
 
+def bag_arg(value: str | None) -> Path | None:
+    """The ``--bag DIR`` folder, checked before any work: a new folder or an earlier bag
+    (replaced whole at the end)."""
+    if not value:
+        return None
+    path = Path(value)
+    if path.exists() and not (path.is_dir() and (path / "metadata.yaml").exists()):
+        raise UsageError(f"--bag {path}: exists and is not a rosbag2 bag (no metadata.yaml); "
+                         f"give a new folder")
+    output_dir(path.parent if str(path.parent) else Path("."))
+    return path
+
+
+def bag_outputs(path: Path | None):
+    """A context giving the staging path to write the bag at (None without ``--bag``); the
+    bag appears at ``path`` only when the block ends normally."""
+    if path is None:
+        return nullcontext(None)
+
+    @contextmanager
+    def staged() -> Iterator[Path]:
+        with Outputs(path.parent, f"bag-{path.name}") as stage:
+            yield stage / path.name
+    return staged()
+
+
+def run_recorded(sc, bag: Path):
+    """``companion run --bag``: the scenario's run recorded as a bag (docs/recording.md)."""
+    from companion.ros.record import record_run, run_config
+
+    spec = sc.episode()
+    if spec.obstacles and spec.obstacle_source != "lidar":
+        print("note: with --bag the controller sees the obstacles through the simulated LiDAR "
+              "(as the ROS 2 node does)", flush=True)
+    with bag_outputs(bag) as staged:
+        return record_run(spec, run_config(spec, sc.controller), staged)
+
+
 def cmd_node(args: argparse.Namespace) -> int:
-    from companion.ros.node import CompanionNode, spin
     from companion.ros.settings import load_node_config
-    from companion.ros.wire import open_transport
 
     config = load_node_config(args.params)
     config = dataclasses.replace(config, ros=_ros_overrides(config.ros, args))
     if args.controller:
         config = dataclasses.replace(config, controller=args.controller)
     limit = duration_arg(args.duration) if args.duration else None
+    bag = bag_arg(args.bag)
+    with bag_outputs(bag) as staged:
+        return _node(config, staged, limit)
+
+
+def _node(config, staged: Path | None, limit: float | None) -> int:
+    from companion.ros.node import CompanionNode, spin
+    from companion.ros.record import RecordedNode, open_bag
+    from companion.ros.wire import open_transport
+
     transport = open_transport(config.ros)
+    bag = open_bag(staged, config) if staged is not None else None
     try:
-        node = CompanionNode(config, transport)
+        node = CompanionNode(config, transport) if bag is None \
+            else RecordedNode(config, transport, bag)
         r = config.ros
         print(f"companion node: {config.controller} at {1 / config.params.dt:g} Hz over "
               f"{r.transport} (domain {r.domain_id}); {r.topics.odom}, "
@@ -84,11 +133,14 @@ def cmd_node(args: argparse.Namespace) -> int:
               flush=True)
     finally:
         transport.close()
+        if bag is not None:
+            bag.close()
     return 0
 
 
 def cmd_sim_robot(args: argparse.Namespace) -> int:
     from companion.apps.commands import _write_run, summary_lines
+    from companion.ros.record import recording_sim_robot
     from companion.ros.settings import load_node_config
     from companion.ros.sim_robot import Interrupted, Pacer, run_sim_robot
     from companion.ros.wire import open_transport
@@ -108,6 +160,7 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
     if args.seed is not None:
         sc = dataclasses.replace(sc, seed=seed_arg(args.seed))
     out = output_dir(Path(args.out or Path("out") / f"sim-robot-{sc.name}"))
+    bag = bag_arg(args.bag)
     transport = open_transport(ros, "companion_sim_robot")
     try:
         with stop_on_signals() as stop:
@@ -117,8 +170,13 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
                   f"over {ros.transport} (domain {ros.domain_id}); waiting for a node on "
                   f"{ros.topics.cmd_vel}", flush=True)
             try:
-                log, robot = run_sim_robot(sc.episode(), transport, ros, pacer, epoch,
-                                           wait_s=wait)
+                with bag_outputs(bag) as staged:
+                    if staged is None:
+                        log, robot = run_sim_robot(sc.episode(), transport, ros, pacer,
+                                                   epoch, wait_s=wait)
+                    else:
+                        log, robot = recording_sim_robot(sc.episode(), transport, ros, pacer,
+                                                         epoch, staged, wait_s=wait)
             except Interrupted:
                 print("companion sim-robot: interrupted; nothing written", flush=True)
                 return stop.code or 130
@@ -132,3 +190,51 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
     print("\n".join(summary_lines(m)))
     print(f"wrote {', '.join(written)} in {out}")
     return 0 if robot.commands else 1
+
+
+def topics_arg(config, pairs: list[str] | None):
+    """``config`` with the topics of ``--topics KEY=NAME ...`` (KEY a field of ros.topics)."""
+    from companion.ros.record import config_mapping
+    from companion.ros.settings import Topics, config_from_mapping
+
+    if not pairs:
+        return config
+    keys = [f.name for f in dataclasses.fields(Topics)]
+    mapping = config_mapping(config)
+    for pair in pairs:
+        key, eq, name = pair.partition("=")
+        if not eq or key not in keys:
+            raise UsageError(f"--topics: expected KEY=NAME with KEY one of {', '.join(keys)}, "
+                             f"got {pair!r}")
+        mapping["ros"]["topics"][key] = name
+    return config_from_mapping(mapping, "--topics: ")
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from companion.ros.replay import bag_config, replay
+    from companion.ros.settings import load_node_config
+
+    bag = Path(args.bag)
+    config = bag_config(bag, load_node_config(args.params) if args.params else None,
+                        args.controller)
+    config = topics_arg(config, args.topics)
+    out = output_dir(Path(args.out or Path("out") / f"replay-{bag.name}"))
+    with Outputs(out, "replay") as stage:
+        m = replay(bag, config, stage / "bag")
+        m["bag"] = str(bag)
+        write_json(stage / "metrics.json", m)
+
+    def num(x, scale=1.0):
+        return "n/a" if x is None else f"{x * scale:.4g}"
+    print(f"replayed {bag} through {config.controller}: {m['ticks']} ticks, "
+          f"{m['ticks_with_estimate']} with a person estimate")
+    print(f"  RMSE rho {num(m['rmse_rho_m'])} m, alpha {num(m['rmse_alpha_rad'])} rad, "
+          f"beta {num(m['rmse_beta_rad'])} rad (robot pose from the recorded odometry, person "
+          f"from the replayed tracker)")
+    if m["paired_commands"]:
+        print(f"  computed - recorded command over {m['paired_commands']} ticks: v RMS "
+              f"{num(m['cmd_diff_v_mps_rms'])} m/s (max {num(m['cmd_diff_v_mps_max'])}), "
+              f"omega RMS {num(m['cmd_diff_omega_radps_rms'])} rad/s "
+              f"(max {num(m['cmd_diff_omega_radps_max'])})")
+    print(f"wrote bag/, metrics.json in {out}")
+    return 0
