@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -84,11 +85,13 @@ def record_run(spec: EpisodeSpec, config: NodeConfig, bag_path: Path) -> Log:
 
 
 def recording_sim_robot(spec: EpisodeSpec, transport: Transport, ros: RosParams,
-                        pacer: Pacer, epoch: float, bag_path: Path, wait_s: float = 0.0
+                        pacer: Pacer, epoch: float, bag_path: Path, wait_s: float = 0.0,
+                        after: Callable[[float], None] | None = None
                         ) -> tuple[Log, WireRobot]:
     """:func:`~companion.ros.sim_robot.run_sim_robot` recording what the robot sends and
     receives, the node's status and markers, and the scene of the truth (robot, person, the
-    slot on the true person, obstacles), in a bag at ``bag_path``."""
+    slot on the true person, obstacles), in a bag at ``bag_path``; ``after`` as in
+    run_sim_robot."""
     p = spec.params
     bag = BagWriter(bag_path, ros.distro)
     try:
@@ -101,7 +104,9 @@ def recording_sim_robot(spec: EpisodeSpec, transport: Transport, ros: RosParams,
         scene = Scene(ros.odom_frame, p.robot.radius)
         reach = tuple((ob, influence_range(ob, p.avoidance)) for ob in spec.obstacles)
 
-        def after(k: float) -> None:
+        def sample_done(k: float) -> None:
+            if after is not None:
+                after(k)                 # a lock-step node (tests)
             odom = rec.last.get(t.odom)
             if odom is None:
                 return
@@ -111,7 +116,7 @@ def recording_sim_robot(spec: EpisodeSpec, transport: Transport, ros: RosParams,
             if update is not None:
                 rec.record(SCENE_TOPIC, SCENE_TYPE, update)
 
-        return run_sim_robot(spec, rec, ros, pacer, epoch, after=after, wait_s=wait_s)
+        return run_sim_robot(spec, rec, ros, pacer, epoch, after=sample_done, wait_s=wait_s)
     finally:
         bag.close()
 

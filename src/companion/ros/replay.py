@@ -75,16 +75,24 @@ class BagReader:
         decoded is a ConfigError naming it."""
         ts = self.typestore
         count = 0
+        seen = dict.fromkeys((c.topic for c in connections), 0)
         it = self.reader.messages(connections=connections)
         while True:
             try:
                 c, t, data = next(it)
             except StopIteration:
+                for c in connections:     # fewer messages than the bag's index: damaged
+                    if seen[c.topic] != c.msgcount:
+                        raise ConfigError(
+                            f"{self.path}: topic {c.topic}: {seen[c.topic]} of the "
+                            f"{c.msgcount} messages the bag lists could be read; a record is "
+                            f"truncated or corrupt") from None
                 return
             except Exception as exc:
                 raise ConfigError(f"{self.path}: record after message {count} cannot be read "
                                   f"({_first_line(exc)}); truncated or corrupt") from None
             count += 1
+            seen[c.topic] += 1
             try:
                 msg = ts.deserialize_cdr(data, c.msgtype)
             except Exception as exc:
