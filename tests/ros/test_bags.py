@@ -10,7 +10,6 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -188,7 +187,7 @@ def test_sigterm_mid_run_leaves_no_bag(tmp_path):
 
 
 def test_a_second_recording_replaces_the_bag_whole(tmp_path, recorded):
-    from companion.apps.rosapps import bag_outputs
+    from companion.apps.bags import bag_outputs
 
     path = tmp_path / "bag"
     for seconds in (1.0, 2.0):

@@ -107,7 +107,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     checked_controllers([sc.controller], sc.params, args.params or sc.source)
     out = output_dir(Path(args.out or Path("out") / sc.name))
     if args.bag:
-        from companion.apps.rosapps import bag_arg, run_recorded
+        from companion.apps.bags import bag_arg, run_recorded
 
         log = run_recorded(sc, bag_arg(args.bag))
     else:
