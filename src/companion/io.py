@@ -126,11 +126,25 @@ class Outputs:
         new = sorted(p.name for p in self.stage.iterdir())
         for name in old:
             if name not in new and isinstance(name, str) and "/" not in name:
-                (self.folder / name).unlink(missing_ok=True)
+                _remove(self.folder / name)
         for name in new:
-            os.replace(self.stage / name, self.folder / name)
+            target = self.folder / name
+            if target.is_dir() and not target.is_symlink():   # a folder output (a bag)
+                old_dir = self.stage.with_name(f"{self.stage.name}-old")
+                os.replace(target, old_dir)
+                os.replace(self.stage / name, target)
+                shutil.rmtree(old_dir, ignore_errors=True)
+            else:
+                os.replace(self.stage / name, target)
         write_text(manifest, json.dumps(new) + "\n")
         shutil.rmtree(self.stage, ignore_errors=True)
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        path.unlink(missing_ok=True)
 
 
 def remove_stale(folder: Path) -> None:

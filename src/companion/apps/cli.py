@@ -71,6 +71,8 @@ def parser() -> argparse.ArgumentParser:
     run.add_argument("--out", metavar="DIR", help="output folder (default out/SCENARIO)")
     run.add_argument("--plot", action="store_true", help="also write trajectory.png, "
                      "errors.png, inputs.png (and avoidance.png when there are obstacles)")
+    run.add_argument("--bag", metavar="DIR", help="also record the run as a ROS 2 bag (MCAP) "
+                     "with a Foxglove scene, through the ROS 2 node (docs/recording.md)")
     _sensing(run)
     run.set_defaults(func="cmd_run")
 
@@ -173,6 +175,8 @@ def _ros_commands(sub) -> None:
                     help="controller (default: the parameters', lqr)")
     nd.add_argument("--duration", metavar="S", help="stop after S s of the node's time, at "
                     "most 86400 (default: run until SIGINT or SIGTERM)")
+    nd.add_argument("--bag", metavar="DIR", help="record what the node receives and sends, "
+                    "and a Foxglove scene, as a ROS 2 bag (MCAP) (docs/recording.md)")
     _transport(nd)
     nd.set_defaults(func="rosapps.cmd_node")
 
@@ -191,10 +195,24 @@ def _ros_commands(sub) -> None:
     sr.add_argument("--seed", type=int, metavar="N", help="sensing noise seed >= 0")
     sr.add_argument("--out", metavar="DIR", help="output folder (default "
                     "out/sim-robot-SCENARIO)")
+    sr.add_argument("--bag", metavar="DIR", help="record what the robot sends and receives, "
+                    "and a Foxglove scene, as a ROS 2 bag (MCAP) (docs/recording.md)")
     _sensing(sr)
     _transport(sr)
     sr.set_defaults(func="rosapps.cmd_sim_robot", controller=None, side=None, bearing=None,
                     distance=None, start=None, person_csv=None, params=None, obstacles=None)
+
+    rb = sub.add_parser("replay", help="replay a ROS 2 bag's odometry, scan and person "
+                        "detections through the node, open loop (docs/recording.md)")
+    rb.add_argument("bag", help="rosbag2 folder (sqlite3 or MCAP storage)")
+    rb.add_argument("--controller", choices=CONTROLLERS,
+                    help="controller (default: the recording's, else lqr)")
+    rb.add_argument("--params", metavar="FILE", help="ROS 2 parameters YAML (default: those a "
+                    "companion recording stored in the bag, else every default)")
+    rb.add_argument("--topics", nargs="+", metavar="KEY=NAME",
+                    help="topic names, e.g. odom=/robot/odom person=/people scan= (none)")
+    rb.add_argument("--out", metavar="DIR", help="output folder (default out/replay-BAG)")
+    rb.set_defaults(func="rosapps.cmd_replay")
 
 
 class Terminated(BaseException):

@@ -106,7 +106,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     lookup(sc.controller)  # unknown names: ConfigError with a hint
     checked_controllers([sc.controller], sc.params, args.params or sc.source)
     out = output_dir(Path(args.out or Path("out") / sc.name))
-    log = run_scenario(sc)
+    if args.bag:
+        from companion.apps.bags import bag_arg, run_recorded
+
+        log = run_recorded(sc, bag_arg(args.bag))
+    else:
+        log = run_scenario(sc)
     m = metrics.compute(log)
     m["scenario"] = sc.name
     m["controller"] = sc.controller

@@ -1,4 +1,5 @@
-"""``companion node`` and ``companion sim-robot``: the ROS 2 commands (docs/ros.md)."""
+"""``companion node``, ``companion sim-robot`` and ``companion replay``: the ROS 2 commands
+(docs/ros.md, docs/recording.md); ``--bag`` of these and of ``companion run``."""
 
 from __future__ import annotations
 
@@ -20,7 +21,8 @@ from companion.apps.args import (
     positive_arg,
     seed_arg,
 )
-from companion.io import Outputs
+from companion.apps.bags import bag_arg, bag_outputs
+from companion.io import Outputs, write_json
 
 
 def _ros_overrides(ros, args: argparse.Namespace):
@@ -66,20 +68,30 @@ def stop_on_signals() -> Iterator[Stop]:
 
 
 def cmd_node(args: argparse.Namespace) -> int:
-    from companion.ros.node import CompanionNode, spin
     from companion.ros.settings import load_node_config
-    from companion.ros.wire import open_transport
-    from companion.sim.runner import warm_up
 
     config = load_node_config(args.params)
     config = dataclasses.replace(config, ros=_ros_overrides(config.ros, args))
     if args.controller:
         config = dataclasses.replace(config, controller=args.controller)
     limit = duration_arg(args.duration) if args.duration else None
+    bag = bag_arg(args.bag)
+    with bag_outputs(bag) as staged:
+        return _node(config, staged, limit)
+
+
+def _node(config, staged: Path | None, limit: float | None) -> int:
+    from companion.ros.node import CompanionNode, spin
+    from companion.ros.record import RecordedNode, open_bag
+    from companion.ros.wire import open_transport
+    from companion.sim.runner import warm_up
+
     warm_up()                      # compile or load the kernels before the first period
     transport = open_transport(config.ros)
+    bag = open_bag(staged, config) if staged is not None else None
     try:
-        node = CompanionNode(config, transport)
+        node = CompanionNode(config, transport) if bag is None \
+            else RecordedNode(config, transport, bag)
         r = config.ros
         print(f"companion node: {config.controller} at {1 / config.params.dt:g} Hz over "
               f"{r.transport} (domain {r.domain_id}); {r.topics.odom}, "
@@ -91,11 +103,14 @@ def cmd_node(args: argparse.Namespace) -> int:
               flush=True)
     finally:
         transport.close()
+        if bag is not None:
+            bag.close()
     return 0
 
 
 def cmd_sim_robot(args: argparse.Namespace) -> int:
     from companion.apps.commands import _write_run, summary_lines
+    from companion.ros.record import recording_sim_robot
     from companion.ros.settings import load_node_config
     from companion.ros.sim_robot import Interrupted, Pacer, run_sim_robot
     from companion.ros.wire import open_transport
@@ -116,6 +131,7 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
     if args.seed is not None:
         sc = dataclasses.replace(sc, seed=seed_arg(args.seed))
     out = output_dir(Path(args.out or Path("out") / f"sim-robot-{sc.name}"))
+    bag = bag_arg(args.bag)
     warm_up()
     transport = open_transport(ros, "companion_sim_robot", robot=True)
     try:
@@ -126,8 +142,13 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
                   f"over {ros.transport} (domain {ros.domain_id}); waiting for a node on "
                   f"{ros.topics.cmd_vel}", flush=True)
             try:
-                log, robot = run_sim_robot(sc.episode(), transport, ros, pacer, epoch,
-                                           wait_s=wait)
+                with bag_outputs(bag) as staged:
+                    if staged is None:
+                        log, robot = run_sim_robot(sc.episode(), transport, ros, pacer,
+                                                   epoch, wait_s=wait)
+                    else:
+                        log, robot = recording_sim_robot(sc.episode(), transport, ros, pacer,
+                                                         epoch, staged, wait_s=wait)
             except Interrupted:
                 print("companion sim-robot: interrupted; nothing written", flush=True)
                 return stop.code or 130
@@ -141,3 +162,51 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
     print("\n".join(summary_lines(m)))
     print(f"wrote {', '.join(written)} in {out}")
     return 0 if robot.commands else 1
+
+
+def topics_arg(config, pairs: list[str] | None):
+    """``config`` with the topics of ``--topics KEY=NAME ...`` (KEY a field of ros.topics)."""
+    from companion.ros.record import config_mapping
+    from companion.ros.settings import Topics, config_from_mapping
+
+    if not pairs:
+        return config
+    keys = [f.name for f in dataclasses.fields(Topics)]
+    mapping = config_mapping(config)
+    for pair in pairs:
+        key, eq, name = pair.partition("=")
+        if not eq or key not in keys:
+            raise UsageError(f"--topics: expected KEY=NAME with KEY one of {', '.join(keys)}, "
+                             f"got {pair!r}")
+        mapping["ros"]["topics"][key] = name
+    return config_from_mapping(mapping, "--topics: ")
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from companion.ros.replay import bag_config, replay
+    from companion.ros.settings import load_node_config
+
+    bag = Path(args.bag)
+    config = bag_config(bag, load_node_config(args.params) if args.params else None,
+                        args.controller)
+    config = topics_arg(config, args.topics)
+    out = output_dir(Path(args.out or Path("out") / f"replay-{bag.name}"))
+    with Outputs(out, "replay") as stage:
+        m = replay(bag, config, stage / "bag")
+        m["bag"] = str(bag)
+        write_json(stage / "metrics.json", m)
+
+    def num(x, scale=1.0):
+        return "n/a" if x is None else f"{x * scale:.4g}"
+    print(f"replayed {bag} through {config.controller}: {m['ticks']} ticks, "
+          f"{m['ticks_with_estimate']} with a person estimate")
+    print(f"  RMSE rho {num(m['rmse_rho_m'])} m, alpha {num(m['rmse_alpha_rad'])} rad, "
+          f"beta {num(m['rmse_beta_rad'])} rad (robot pose from the recorded odometry, person "
+          f"from the replayed tracker)")
+    if m["paired_commands"]:
+        print(f"  computed - recorded command over {m['paired_commands']} ticks: v RMS "
+              f"{num(m['cmd_diff_v_mps_rms'])} m/s (max {num(m['cmd_diff_v_mps_max'])}), "
+              f"omega RMS {num(m['cmd_diff_omega_radps_rms'])} rad/s "
+              f"(max {num(m['cmd_diff_omega_radps_max'])})")
+    print(f"wrote bag/, metrics.json in {out}")
+    return 0

@@ -258,7 +258,7 @@ def markers_msg(t: float, frame: str, estimate: PersonEstimate | None,
                 obstacles: Sequence[tuple[Circle, float]]) -> Any:
     """visualization_msgs/MarkerArray for RViz: the person estimate (an arrow along its
     heading), the desired slot and the known round obstacles with their influence range
-    (pairs of circle and range, m); a
+    (pairs of circle and range, m, measured from the surface as the avoidance does); a
     DELETEALL first, so obstacles that went away disappear."""
     clear = make("visualization_msgs/msg/Marker", header=header(t, frame), action=DELETEALL)
     out = [clear]
@@ -272,7 +272,7 @@ def markers_msg(t: float, frame: str, estimate: PersonEstimate | None,
         out.append(_marker(t, frame, "obstacles", i, CYLINDER, ob.x, ob.y, 0.0,
                            (2 * ob.radius, 2 * ob.radius, 0.5), "obstacle"))
         out.append(_marker(t, frame, "influence", i, CYLINDER, ob.x, ob.y, 0.0,
-                           (2 * reach, 2 * reach, 0.02), "influence"))
+                           (2 * (ob.radius + reach),) * 2 + (0.02,), "influence"))
     return make("visualization_msgs/msg/MarkerArray", markers=out)
 
 

@@ -17,7 +17,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -31,9 +31,28 @@ from companion.ros import convert
 from companion.ros.convert import OdometrySample, Stamped
 from companion.ros.settings import NodeConfig
 from companion.ros.transport import DEFAULT, SENSOR_DATA, Qos, Transport
-from companion.types import Circle, Command, Observation, PersonDetection, Pose
+from companion.types import (
+    Circle,
+    Command,
+    Observation,
+    PersonDetection,
+    PersonEstimate,
+    Pose,
+)
 
 _NOWHERE = Pose(math.nan, math.nan, math.nan)
+
+
+class View(NamedTuple):
+    """What the node shows of one tick (markers, the recorded scene): the time (s), the
+    robot pose it used, the person estimate, the desired slot and the obstacles it knows with
+    their influence ranges (m)."""
+
+    t: float
+    robot: Pose
+    estimate: PersonEstimate | None
+    slot: tuple[float, float] | None
+    obstacles: tuple[tuple[Circle, float], ...]
 
 
 def pose_at(samples: deque[OdometrySample], t: float) -> Pose | None:
@@ -76,6 +95,7 @@ class CompanionNode:
         self._sim_time: float | None = None
         self._seen: tuple[float, float] | None = None
         self.last: Command | None = None
+        self.view: View | None = None
         t = r.topics
         reliable = Qos(depth=r.history_depth)
         transport.subscribe(t.odom, "nav_msgs/msg/Odometry", self.on_odom, reliable)
@@ -223,10 +243,10 @@ class CompanionNode:
                                     p.robot.d)
             slot = slot_point(w, p)
         self._status(convert.status_msg(now, cmd, errors, r.node_name))
+        reach = tuple((ob, influence_range(ob, p.avoidance)) for ob in self._obstacles)
+        self.view = View(now, robot, e, slot, reach)
         if self._markers is not None:
-            reach = [(ob, influence_range(ob, p.avoidance)) for ob in self._obstacles]
             self._markers(convert.markers_msg(now, r.odom_frame, e, slot, reach))
-
 
 def spin(node: CompanionNode, stop: threading.Event, limit_s: float | None = None) -> int:
     """Tick ``node`` every period until ``stop`` is set (or ``limit_s`` s of the node's time
