@@ -38,10 +38,11 @@ def write_log(path: str | Path, log: Log) -> None:
 
 class Thinned:
     """Every ``step``-th row of a log fed block by block, ``step`` chosen so that at most
-    ``limit`` of ``steps`` rows are kept (all of a short run's)."""
+    ``limit`` (default :data:`PLOT_ROWS`) of ``steps`` rows are kept (all of a short
+    run's)."""
 
-    def __init__(self, steps: int, limit: int = PLOT_ROWS):
-        self.step = max(1, math.ceil(steps / limit))
+    def __init__(self, steps: int, limit: int | None = None):
+        self.step = max(1, math.ceil(steps / (limit or PLOT_ROWS)))
         self._seen = 0
         self._parts: list[Log] = []
 
@@ -50,6 +51,8 @@ class Thinned:
         self._parts.append(Log({name: a[first::self.step].copy()   # not a view: the block
                                 for name, a in block.columns.items()}))  # can go
         self._seen += len(block)
+        if len(self._parts) >= 16:               # a long run's many small parts in one
+            self._parts = [Log.concat(self._parts)]
 
     def log(self) -> Log:
         return Log.concat(self._parts)
