@@ -43,12 +43,12 @@ def blocks_written(monkeypatch):
 
 
 def test_run_streams_the_log_equal_to_the_log_in_memory(tmp_path, capsys, blocks_written):
-    assert main(["run", "corridor", "--duration", "250", "--sensing", "realistic",
+    assert main(["run", "line", "--duration", "210", "--sensing", "realistic",
                  "--out", str(tmp_path)]) == 0
-    n = 5000
+    n = 4200
     assert blocks_written == [BLOCK_ROWS] * (n // BLOCK_ROWS) + [n % BLOCK_ROWS]
-    sc = load_scenario("corridor")
-    log = run_one(replace(sc.episode(), duration=250.0,
+    sc = load_scenario("line")
+    log = run_one(replace(sc.episode(), duration=210.0,
                           params=sc.params.replace(sensing=REALISTIC)))
     assert len(set(log["status"])) > 1
     assert (tmp_path / "log.csv").read_text() == csv_text(log)
@@ -63,12 +63,12 @@ def test_run_streams_the_log_equal_to_the_log_in_memory(tmp_path, capsys, blocks
 
 
 def test_soak_streams_its_log(tmp_path, capsys, blocks_written):
-    code = main(["soak", "--duration", "220", "--seed", "1", "--log", "--out", str(tmp_path)])
+    code = main(["soak", "--duration", "210", "--seed", "1", "--log", "--out", str(tmp_path)])
     assert code == 0
-    assert blocks_written == [BLOCK_ROWS, 4400 - BLOCK_ROWS]
-    log = run_one(soak_episode(220.0, seed=1))
+    assert blocks_written == [BLOCK_ROWS, 4200 - BLOCK_ROWS]
+    log = run_one(soak_episode(210.0, seed=1))
     assert (tmp_path / "log.csv").read_text() == csv_text(log)
-    assert json.loads((tmp_path / "soak.json").read_text())["steps"] == 4400
+    assert json.loads((tmp_path / "soak.json").read_text())["steps"] == 4200
 
 
 def test_plots_of_a_long_run_get_a_thinned_log(tmp_path, capsys, monkeypatch):
