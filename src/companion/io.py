@@ -5,12 +5,12 @@ all (to a temporary file, then renamed), and a command's outputs replaced togeth
 from __future__ import annotations
 
 import csv
-import io
 import json
 import os
 import shutil
 import tempfile
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -43,11 +43,10 @@ def _umask() -> int:
 _UMASK = _umask()
 
 
-def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
-    """Call ``write(tmp_path)`` and atomically rename the result to ``path``.
-
-    On any error the temporary file is removed and ``path`` is left untouched.
-    """
+@contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """A temporary path beside ``path`` to write to, renamed to ``path`` when the block ends
+    normally; on any error the temporary file is removed and ``path`` is left untouched."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -55,12 +54,21 @@ def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
     tmp_path = Path(tmp)
     os.chmod(tmp_path, 0o666 & ~_UMASK)      # mkstemp makes it 0600: follow the umask
     try:
-        write(tmp_path)
+        yield tmp_path
         os.replace(tmp_path, path)
     except BaseException:
         tmp_path.unlink(missing_ok=True)
         raise
-    return path
+
+
+def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
+    """Call ``write(tmp_path)`` and atomically rename the result to ``path``.
+
+    On any error the temporary file is removed and ``path`` is left untouched.
+    """
+    with atomic_path(path) as tmp:
+        write(tmp)
+    return Path(path)
 
 
 def write_text(path: str | Path, text: str) -> Path:
@@ -73,12 +81,38 @@ def write_json(path: str | Path, data: Any) -> Path:
 
 def write_csv(path: str | Path, header: Sequence[str], rows: Iterable[Sequence[Any]]) -> Path:
     """Write a CSV; floats with 10 significant digits."""
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(header)
-    for row in rows:
-        w.writerow([f"{v:.10g}" if isinstance(v, float) else v for v in row])
-    return write_text(path, buf.getvalue())
+    with CsvWriter(path, header) as out:
+        out.add(rows)
+    return Path(path)
+
+
+def _cell(value: Any) -> Any:
+    return f"{value:.10g}" if isinstance(value, float) else value
+
+
+class CsvWriter:
+    """A CSV file written as its rows come, whole or not at all: ``with CsvWriter(path,
+    header) as out: out.add(rows)`` as often as needed; the file appears at ``path`` when
+    the block ends normally (:func:`atomic_path`). Floats get 10 significant digits."""
+
+    def __init__(self, path: str | Path, header: Sequence[str]):
+        self.path, self.header = Path(path), header
+        self._stack = ExitStack()
+
+    def __enter__(self) -> CsvWriter:
+        with ExitStack() as stack:
+            tmp = stack.enter_context(atomic_path(self.path))
+            self._file = stack.enter_context(open(tmp, "w", encoding="utf-8", newline=""))
+            self._csv = csv.writer(self._file, lineterminator="\n")
+            self._csv.writerow(self.header)
+            self._stack = stack.pop_all()
+        return self
+
+    def add(self, rows: Iterable[Sequence[Any]]) -> None:
+        self._csv.writerows([_cell(v) for v in row] for row in rows)
+
+    def __exit__(self, kind, value, trace) -> bool | None:
+        return self._stack.__exit__(kind, value, trace)
 
 
 def save_figure(fig: Any, path: str | Path, dpi: int = 120) -> Path:

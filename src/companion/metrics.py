@@ -43,71 +43,192 @@ def errors(log: Log) -> dict[str, np.ndarray]:
     }
 
 
-def _rms(x: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(np.square(x))))
-
-
 def settling_time(log: Log, tol: Tolerance = Tolerance()) -> float | None:
     """First time from which all errors stay inside ``tol`` to the end, or None."""
-    e = errors(log)
-    inside = ((np.abs(e["rho"]) < tol.rho) & (np.abs(e["alpha"]) < tol.alpha)
-              & (np.abs(e["beta_ref"]) < tol.beta))
-    if len(inside) == 0 or not inside[-1]:
-        return None
-    outside = np.flatnonzero(~inside)
-    first = 0 if len(outside) == 0 else outside[-1] + 1
-    return float(log["t"][first])
+    settle = Settling(tol)
+    settle.add(log, errors(log))
+    return settle.value()
 
 
 def obstacle_metrics(log: Log) -> dict:
     """``min_obstacle_clearance_m`` (footprint to surface; None without obstacles) and
     ``obstacle_collisions``: the number of separate contacts (entries into clearance <= 0)."""
-    rho_ob = log["rho_ob"]
-    if len(rho_ob) == 0 or np.all(np.isnan(rho_ob)):
-        return {"min_obstacle_clearance_m": None, "obstacle_collisions": 0}
-    contact = rho_ob <= 0.0
-    entries = int(contact[0]) + int(np.count_nonzero(contact[1:] & ~contact[:-1]))
-    return {"min_obstacle_clearance_m": float(np.nanmin(rho_ob)), "obstacle_collisions": entries}
+    ob = Obstacles()
+    ob.add(log)
+    return ob.value()
 
 
 def status_shares(log: Log) -> dict:
     """Shares of the samples in which the safety supervisor reported each status."""
-    status = log.columns.get("status")
-    if status is None or len(status) == 0:
-        return {"share_ok": 1.0, "share_degraded": 0.0, "share_stopped": 0.0}
-    return {f"share_{s}": float(np.mean(status == s)) for s in ("ok", "degraded", "stopped")}
-
-
-def _duration(log: Log) -> float:
-    """Simulated time covered by the log: the last sample plus one period."""
-    t = log["t"]
-    return float(t[-1] + (t[1] - t[0])) if len(t) > 1 else 0.0
+    shares = Statuses()
+    shares.add(log)
+    return shares.value()
 
 
 def compute(log: Log, tol: Tolerance = Tolerance()) -> dict:
     """All metrics as a JSON-ready dict (SI units; key names carry the unit)."""
-    e = errors(log)
-    dist = np.hypot(log["robot_x"] - log["person_x"], log["robot_y"] - log["person_y"])
-    settle = settling_time(log, tol)
-    values = {
-        "rmse_rho_m": _rms(e["rho"]),
-        "rmse_alpha_rad": _rms(e["alpha"]),
-        "rmse_beta_rad": _rms(e["beta"]),
-        "rmsv_v_mps": _rms(log["v"] - log["person_v"]),
-        "rmsv_omega_radps": _rms(log["omega"] - log["person_omega"]),
-        "min_person_distance_m": float(np.min(dist)),
-        "settling_time_s": settle,
-        "final_abs_error": {
-            "rho_m": float(abs(e["rho"][-1])),
-            "alpha_rad": float(abs(e["alpha"][-1])),
-            "beta_rad": float(abs(e["beta_ref"][-1])),
-        },
-        "duration_s": _duration(log),
-        "steps": len(log),
-    }
-    values.update(obstacle_metrics(log))
-    values.update(status_shares(log))
-    finite = all(math.isfinite(v) for v in (values["rmse_rho_m"], values["rmse_alpha_rad"]))
-    values["finite"] = bool(finite and np.all(np.isfinite(log["v"]))
-                            and np.all(np.isfinite(log["omega"])))
-    return values
+    running = Running(tol)
+    running.add(log)
+    return running.value()
+
+
+# Each metric is kept by an accumulator fed the log block by block (one block: the whole log),
+# so that a long episode streamed to disk (companion.sim.episode.episode_blocks) is measured
+# in bounded memory by the same code as a log in memory.
+
+class Entries:
+    """The number of separate entries into a condition over consecutive blocks of samples:
+    samples where it holds and did not hold at the sample before (the first sample counts
+    when it holds)."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self._last = False
+
+    def add(self, holds: np.ndarray) -> None:
+        if len(holds):
+            self.count += int(holds[0] and not self._last) + int(np.count_nonzero(
+                holds[1:] & ~holds[:-1]))
+            self._last = bool(holds[-1])
+
+
+class Settling:
+    """Settling time (see :func:`settling_time`) over consecutive blocks."""
+
+    def __init__(self, tol: Tolerance = Tolerance()):
+        self.tol = tol
+        self._time: float | None = None
+        self._pending = True      # the settling sample is the next block's first
+        self._inside_at_end = False
+
+    def add(self, log: Log, e: dict[str, np.ndarray]) -> None:
+        tol = self.tol
+        inside = ((np.abs(e["rho"]) < tol.rho) & (np.abs(e["alpha"]) < tol.alpha)
+                  & (np.abs(e["beta_ref"]) < tol.beta))
+        if len(inside) == 0:
+            return
+        outside = np.flatnonzero(~inside)
+        if len(outside):
+            first = outside[-1] + 1
+            self._pending = first == len(inside)
+            self._time = None if self._pending else float(log["t"][first])
+        elif self._pending:
+            self._time, self._pending = float(log["t"][0]), False
+        self._inside_at_end = bool(inside[-1])
+
+    def value(self) -> float | None:
+        return self._time if self._inside_at_end else None
+
+
+class Obstacles:
+    """Obstacle clearance and contacts (see :func:`obstacle_metrics`) over consecutive blocks."""
+
+    def __init__(self) -> None:
+        self._min: float | None = None
+        self._contacts = Entries()
+
+    def add(self, log: Log) -> None:
+        rho_ob = log["rho_ob"]
+        if len(rho_ob) and not np.all(np.isnan(rho_ob)):
+            low = float(np.nanmin(rho_ob))
+            self._min = low if self._min is None else min(self._min, low)
+        self._contacts.add(rho_ob <= 0.0)
+
+    def value(self) -> dict:
+        if self._min is None:
+            return {"min_obstacle_clearance_m": None, "obstacle_collisions": 0}
+        return {"min_obstacle_clearance_m": self._min,
+                "obstacle_collisions": self._contacts.count}
+
+
+STATUSES = ("ok", "degraded", "stopped")
+
+
+class Statuses:
+    """Shares of the supervisor's statuses (see :func:`status_shares`) over consecutive
+    blocks."""
+
+    def __init__(self) -> None:
+        self._n = 0
+        self._counts = dict.fromkeys(STATUSES, 0)
+
+    def add(self, log: Log) -> None:
+        status = log.columns.get("status")
+        if status is not None:
+            self._n += len(status)
+            for s in STATUSES:
+                self._counts[s] += int(np.count_nonzero(status == s))
+
+    def value(self) -> dict:
+        if self._n == 0:
+            return {"share_ok": 1.0, "share_degraded": 0.0, "share_stopped": 0.0}
+        return {f"share_{s}": self._counts[s] / self._n for s in STATUSES}
+
+
+#: The root-mean-square metrics: key and the per-sample error it is taken of.
+RMS = {
+    "rmse_rho_m": lambda log, e: e["rho"],
+    "rmse_alpha_rad": lambda log, e: e["alpha"],
+    "rmse_beta_rad": lambda log, e: e["beta"],
+    "rmsv_v_mps": lambda log, e: log["v"] - log["person_v"],
+    "rmsv_omega_radps": lambda log, e: log["omega"] - log["person_omega"],
+}
+
+
+class Running:
+    """All the metrics of :func:`compute` over consecutive blocks of one episode's log:
+    ``add`` each block in order, then ``value()``. Sums of squares, minima and counts are
+    kept, not the samples."""
+
+    def __init__(self, tol: Tolerance = Tolerance()):
+        self.steps = 0
+        self._squares = dict.fromkeys(RMS, 0.0)
+        self._min_distance = math.inf
+        self._settling = Settling(tol)
+        self._obstacles = Obstacles()
+        self._statuses = Statuses()
+        self._finite = True
+        self._times: list[float] = []          # the first two sample times
+        self._last: tuple[float, dict] = (math.nan, {})
+
+    def add(self, log: Log) -> None:
+        n = len(log)
+        if n == 0:
+            return
+        e = errors(log)
+        for key, error in RMS.items():
+            self._squares[key] += float(np.sum(np.square(error(log, e))))
+        dist = np.hypot(log["robot_x"] - log["person_x"], log["robot_y"] - log["person_y"])
+        self._min_distance = float(np.minimum(self._min_distance, np.min(dist)))  # NaN stays
+        self._settling.add(log, e)
+        self._obstacles.add(log)
+        self._statuses.add(log)
+        self._finite = self._finite and bool(np.all(np.isfinite(log["v"]))
+                                             and np.all(np.isfinite(log["omega"])))
+        t = log["t"]
+        self._times = (self._times + [float(x) for x in t[:2]])[:2]
+        self._last = (float(t[-1]), {"rho_m": float(abs(e["rho"][-1])),
+                                     "alpha_rad": float(abs(e["alpha"][-1])),
+                                     "beta_rad": float(abs(e["beta_ref"][-1]))})
+        self.steps += n
+
+    def value(self) -> dict:
+        """The metrics as a JSON-ready dict (SI units; key names carry the unit)."""
+        rms = {k: math.sqrt(s / self.steps) if self.steps else math.nan
+               for k, s in self._squares.items()}
+        t_last, final = self._last
+        times = self._times
+        values = {
+            **rms,
+            "min_person_distance_m": self._min_distance,
+            "settling_time_s": self._settling.value(),
+            "final_abs_error": final,
+            # the simulated time covered: the last sample plus one period
+            "duration_s": t_last + (times[1] - times[0]) if len(times) > 1 else 0.0,
+            "steps": self.steps,
+        }
+        values.update(self._obstacles.value())
+        values.update(self._statuses.value())
+        values["finite"] = bool(self._finite and math.isfinite(rms["rmse_rho_m"])
+                                and math.isfinite(rms["rmse_alpha_rad"]))
+        return values

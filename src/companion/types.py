@@ -7,6 +7,7 @@ field says otherwise.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -193,6 +194,13 @@ class Log:
 
     def __len__(self) -> int:
         return len(self.columns["t"])
+
+    @staticmethod
+    def concat(blocks: Iterable[Log]) -> Log:
+        """The logs of consecutive blocks of one episode joined into one log."""
+        parts = list(blocks)
+        return Log({name: np.concatenate([p.columns[name] for p in parts])
+                    for name in parts[0].columns})
 
     def equals(self, other: Log) -> bool:
         """True if both logs hold the same columns with bit-identical values."""

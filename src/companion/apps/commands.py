@@ -7,10 +7,11 @@ the file, line or key. Output files are written whole or not at all.
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import sys
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 
 from tqdm import tqdm
@@ -29,25 +30,14 @@ from companion.apps.args import (
     seed_arg,
     workers_arg,
 )
+from companion.apps.logfile import LogCsv, Thinned
 from companion.control import CONTROLLERS, lookup
 from companion.data import pedestrians
 from companion.io import Outputs, save_figure, write_csv, write_json
 from companion.sim import convergence, soak
-from companion.sim.runner import run_many
-from companion.sim.scenario import (
-    builtin_names,
-    load_scenario,
-    run_scenario,
-)
-from companion.types import LOG_COLUMNS, TEXT_COLUMNS, Log
-
-
-def write_log(path: Path, log: Log) -> None:
-    cols = [log[c] for c in LOG_COLUMNS]
-    text = [log[c] for c in TEXT_COLUMNS]
-    write_csv(path, (*LOG_COLUMNS, *TEXT_COLUMNS),
-              ([float(c[i]) for c in cols] + [str(c[i]) for c in text]
-               for i in range(len(log))))
+from companion.sim.runner import run_many, stream_one
+from companion.sim.scenario import builtin_names, load_scenario
+from companion.types import Log
 
 
 def summary_lines(m: dict) -> list[str]:
@@ -78,14 +68,31 @@ def progress_bar(total: int, unit: str) -> Iterator[Callable[[int], None]]:
         yield lambda done: bar.update(done - bar.n)
 
 
-def _write_run(out: Path, sc, plot: bool, log: Log, m: dict) -> list[str]:
-    """Write ``companion run``'s files into ``out``; returns their names."""
-    write_log(out / "log.csv", log)
+def started(blocks: Iterator[Log]) -> Iterator[Log]:
+    """An episode's blocks with the first one already simulated, so that bad input is an
+    error before any output is staged."""
+    first = next(blocks)
+    return itertools.chain((first,), blocks)
+
+
+def _write_run(out: Path, sc, plot: bool, blocks: Iterable[Log], extra: dict | None = None
+               ) -> tuple[dict, list[str]]:
+    """Write ``companion run``'s files into ``out`` as the episode's blocks come (``extra``
+    goes into metrics.json too); returns the metrics and the names of the files."""
+    running = metrics.Running()
+    thinned = Thinned(round(sc.duration / sc.params.dt))
+    with LogCsv(out / "log.csv") as csv:
+        for block in blocks:
+            csv.log(block)
+            running.add(block)
+            if plot:
+                thinned.add(block)
+    m = {**running.value(), "scenario": sc.name, "controller": sc.controller, **(extra or {})}
     write_json(out / "metrics.json", m)
     written = ["log.csv", "metrics.json"]
     if plot:
         title = f"{sc.name} / {sc.controller}"
-        runs = {sc.controller: log}
+        runs = {sc.controller: thinned.log()}
         figures = [("trajectory.png", plots.trajectories(runs, title, obstacles=sc.obstacles,
                                                          avoidance=sc.params.avoidance,
                                                          footprint=sc.params.robot.radius)),
@@ -98,7 +105,7 @@ def _write_run(out: Path, sc, plot: bool, log: Log, m: dict) -> list[str]:
             save_figure(fig, out / name)
             plots.close(fig)
             written.append(name)
-    return written
+    return m, written
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -106,17 +113,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     lookup(sc.controller)  # unknown names: ConfigError with a hint
     checked_controllers([sc.controller], sc.params, args.params or sc.source)
     out = output_dir(Path(args.out or Path("out") / sc.name))
-    if args.bag:
+    if args.bag:                            # the episode runs over the recorded graph
         from companion.apps.bags import bag_arg, run_recorded
 
-        log = run_recorded(sc, bag_arg(args.bag))
+        blocks = iter([run_recorded(sc, bag_arg(args.bag))])
     else:
-        log = run_scenario(sc)
-    m = metrics.compute(log)
-    m["scenario"] = sc.name
-    m["controller"] = sc.controller
-    with Outputs(out, "run") as stage:
-        written = _write_run(stage, sc, args.plot, log, m)
+        blocks = started(stream_one(sc.episode()))
+    with Outputs(out, "run") as stage:      # the log goes to disk as the episode runs
+        m, written = _write_run(stage, sc, args.plot, blocks)
     # Everything is written before anything is printed: a reader that goes away early
     # (| head) cannot cut the outputs short.
     print(f"{sc.name}: {sc.description}")
@@ -225,17 +229,22 @@ def cmd_soak(args: argparse.Namespace) -> int:
     out = output_dir(Path(args.out or Path("out") / "soak"))
     print(f"soak: {duration:g} s of a random walker among pillars (seed {args.seed}), "
           f"controller {args.controller}; about {duration / 25:.0f} s")
-    summary, log = soak.run_soak(duration, seed_arg(args.seed), args.controller, params)
+    spec = soak.soak_episode(duration, seed_arg(args.seed), args.controller, params)
+    blocks = started(stream_one(spec))
+    summary = soak.Summary(params)
     with Outputs(out, "soak") as stage:
-        write_json(stage / "soak.json", summary)
-        written = ["soak.json"]
-        if args.log:
-            write_log(stage / "log.csv", log)
-            written.append("log.csv")
-    for key, value in summary.items():
+        with LogCsv(stage / "log.csv") if args.log else nullcontext() as csv:
+            for block in blocks:        # the log goes to disk as the episode runs
+                summary.add(block)
+                if csv:
+                    csv.log(block)
+        result = summary.value()
+        write_json(stage / "soak.json", result)
+    written = ["soak.json"] + ["log.csv"] * bool(args.log)
+    for key, value in result.items():
         print(f"  {key:26s} {value:.4g}" if isinstance(value, float) else f"  {key:26s} {value}")
-    ok = summary["finite"] and summary["person_collisions"] == 0 \
-        and summary["obstacle_collisions"] == 0
+    ok = result["finite"] and result["person_collisions"] == 0 \
+        and result["obstacle_collisions"] == 0
     print("PASS: no collision with the person or an obstacle, all values finite" if ok
           else "FAIL: a collision or a non-finite value")
     print(f"wrote {', '.join(written)} in {out}")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 
 import matplotlib
@@ -19,6 +20,8 @@ from companion.types import Circle, Log, Obstacle
 
 PERSON = "tab:red"
 ROBOT = "tab:purple"
+#: Most heading arrows drawn along one path (:func:`trajectories`).
+MAX_ARROWS = 400
 
 
 def _headings(ax, x, y, th, every: int, color: str) -> None:
@@ -59,12 +62,14 @@ def trajectories(runs: Runs, title: str = "", marker_period_s: float = 2.0,
                  obstacles: Sequence[Obstacle] = (), avoidance: AvoidanceParams | None = None,
                  footprint: float = 0.0) -> Figure:
     """Person and robot paths (one per run) with heading arrows every ``marker_period_s``
-    seconds, and the obstacles with their influence ranges (Fig. 3(a), Fig. 4(a))."""
+    seconds (at most :data:`MAX_ARROWS` a path), and the obstacles with their influence
+    ranges (Fig. 3(a), Fig. 4(a))."""
     fig, ax = plt.subplots(figsize=(7, 6), layout="constrained")
     draw_obstacles(ax, obstacles, avoidance, footprint)
     first = next(iter(runs.values()))
     dt = float(first["t"][1] - first["t"][0]) if len(first) > 1 else 1.0
-    every = int(round(marker_period_s / dt))
+    # at most MAX_ARROWS arrows a path: a day-long run's would hide it
+    every = max(int(round(marker_period_s / dt)), math.ceil(len(first) / MAX_ARROWS))
     ax.plot(first["person_x"], first["person_y"], color=PERSON, lw=2, label="person")
     _headings(ax, first["person_x"], first["person_y"], first["person_theta"], every, PERSON)
     ax.plot(first["person_x"][0], first["person_y"][0], "o", color=PERSON, label="start")

@@ -12,7 +12,6 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from companion import metrics
 from companion.apps.args import (
     UsageError,
     build_scenario,
@@ -154,10 +153,9 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
                 return stop.code or 130
     finally:
         transport.close()
-    m = metrics.compute(log)
-    m.update(scenario=sc.name, controller="(over ROS 2)", commands_received=robot.commands)
     with Outputs(out, "sim-robot") as stage:
-        written = _write_run(stage, sc, False, log, m)
+        m, written = _write_run(stage, sc, False, [log], {"controller": "(over ROS 2)",
+                                                          "commands_received": robot.commands})
     print(f"companion sim-robot: {robot.commands} commands received in {len(log)} periods")
     print("\n".join(summary_lines(m)))
     print(f"wrote {', '.join(written)} in {out}")

@@ -13,7 +13,7 @@ deterministic for a given seed.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 
@@ -57,12 +57,29 @@ def timed_out(command: tuple[float, float], params: Params) -> tuple[float, floa
     return towards_zero(command[0], s.decel_max), towards_zero(command[1], s.angular_accel_max)
 
 
+#: Rows per block of :func:`episode_blocks` (about 0.9 MB of numbers).
+BLOCK_ROWS = 4096
+
+
 def run_episode(controller: Controller, person: PersonMotion, params: Params,
                 duration: float, start: Pose | None = None, seed: int = 0,
                 obstacles: Sequence[Obstacle] = (), perception: Perception | None = None,
                 faults: Sequence[Fault] = (),
                 start_velocity: tuple[float, float] | None = None) -> Log:
-    """Simulate ``duration`` seconds and return the log.
+    """Simulate ``duration`` seconds and return the whole log: the blocks of
+    :func:`episode_blocks` (same parameters) joined."""
+    return Log.concat(episode_blocks(controller, person, params, duration, start, seed,
+                                     obstacles, perception, faults, start_velocity))
+
+
+def episode_blocks(controller: Controller, person: PersonMotion, params: Params,
+                   duration: float, start: Pose | None = None, seed: int = 0,
+                   obstacles: Sequence[Obstacle] = (), perception: Perception | None = None,
+                   faults: Sequence[Fault] = (),
+                   start_velocity: tuple[float, float] | None = None,
+                   rows: int = BLOCK_ROWS) -> Iterator[Log]:
+    """Simulate ``duration`` seconds, yielding the log in consecutive blocks of ``rows`` rows
+    (the last one shorter), so that a long episode can go to disk as it runs.
 
     Parameters
     ----------
@@ -89,6 +106,14 @@ def run_episode(controller: Controller, person: PersonMotion, params: Params,
         How the controller learns about obstacles; default: it sees ``obstacles`` exactly.
     faults : sequence of Fault
         Faults injected into what the controller observes (:mod:`companion.sim.faults`).
+    rows : int
+        Rows per block (>= 1).
+
+    Raises
+    ------
+    ConfigError
+        At the first block, for a duration shorter than one period or sensing the controller
+        cannot use.
     """
     dt, d, tau = params.dt, params.robot.d, params.sensing.actuator_tau_s
     f = params.formation
@@ -96,15 +121,15 @@ def run_episode(controller: Controller, person: PersonMotion, params: Params,
     if n < 1:
         raise ConfigError(f"duration: expected at least one sample period ({dt:g} s), "
                           f"got {duration:g} s")
+    if rows < 1:
+        raise ConfigError(f"rows: expected a block of at least one row, got {rows}")
     detections = getattr(controller, "takes_detections", False)
     if not detections and params.sensing != IDEAL:
         raise ConfigError("sensing: a controller without the standard stack sees the true "
                           "person state, which needs ideal sensing")
     rng = np.random.default_rng(seed)
     sensor = PersonSensor(params, person, rng)
-    out = np.empty((n, len(LOG_COLUMNS)))
-    status: list[str] = []
-    reason: list[str] = []
+    block = _Block(min(rows, n))
     obstacles = tuple(obstacles)
     perception = perception or GroundTruth()
     perception.reset()
@@ -150,16 +175,37 @@ def run_episode(controller: Controller, person: PersonMotion, params: Params,
                                               e.state.omega, e.position_std)
         rho, alpha, beta = relative_state(x, y, th, h.x, h.y, h.theta, d)
         beta_ref = slot_reference(h.v, h.omega, f.distance, f.bearing, d).beta
-        out[k] = (t, x, y, th, h.x, h.y, h.theta, h.v, h.omega, rho, alpha, beta,
-                  f.distance, f.bearing, beta_ref, cmd.v, cmd.omega, cmd.u_ob,
-                  nearest_clearance(x, y, obstacles, params.robot.radius), va, wa, *est)
-        status.append(cmd.status)
-        reason.append(cmd.reason)
+        block.add((t, x, y, th, h.x, h.y, h.theta, h.v, h.omega, rho, alpha, beta,
+                   f.distance, f.bearing, beta_ref, cmd.v, cmd.omega, cmd.u_ob,
+                   nearest_clearance(x, y, obstacles, params.robot.radius), va, wa, *est),
+                  cmd.status, cmd.reason)
+        if block.full() or k == n - 1:
+            yield block.log()
+            block = _Block(min(rows, n - k - 1))
         va, v_mean = lagged(va, base[0], tau, dt)
         wa, w_mean = lagged(wa, base[1], tau, dt)
         x, y, th = unicycle_step(x, y, th, v_mean, w_mean, dt)
         th = wrap_pi(th)
-    columns: dict[str, np.ndarray] = {name: out[:, i] for i, name in enumerate(LOG_COLUMNS)}
-    columns["status"] = np.array(status, dtype=str)
-    columns["reason"] = np.array(reason, dtype=str)
-    return Log(columns)
+
+
+class _Block:
+    """Rows of a log being filled, numbers in one array, texts in lists."""
+
+    def __init__(self, rows: int):
+        self.numbers = np.empty((rows, len(LOG_COLUMNS)))
+        self.status: list[str] = []
+        self.reason: list[str] = []
+
+    def add(self, numbers: tuple[float, ...], status: str, reason: str) -> None:
+        self.numbers[len(self.status)] = numbers
+        self.status.append(status)
+        self.reason.append(reason)
+
+    def full(self) -> bool:
+        return len(self.status) == len(self.numbers)
+
+    def log(self) -> Log:
+        columns = {name: self.numbers[:, i] for i, name in enumerate(LOG_COLUMNS)}
+        columns["status"] = np.array(self.status, dtype=str)
+        columns["reason"] = np.array(self.reason, dtype=str)
+        return Log(columns)

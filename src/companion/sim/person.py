@@ -207,22 +207,46 @@ class ScriptedWalk:
                                  "a finite turn rate")
         self.moves = tuple(moves)
         self.step = grid_step
-        rows = [(start[0], start[1], start[2], 0.0, 0.0)]
+        self.accel = accel
+        # Only the row each move starts from is kept; a move's rows are integrated again when
+        # asked for (a day's walk on a 0.02 s grid would be 4 million rows).
+        self._starts: list[Row] = []
+        self._ends: list[int] = []        # grid index of each move's last row
+        row, end = (start[0], start[1], start[2], 0.0, 0.0), 0
         for m in self.moves:
-            rows += integrate_move(rows[-1], m, accel, grid_step)
-        self._rows = rows
+            self._starts.append(row)
+            rows = integrate_move(row, m, accel, grid_step)
+            end += len(rows)
+            self._ends.append(end)
+            row = rows[-1]
+        self._final = row
+        self._cache: dict[int, list[Row]] = {}
 
     @property
     def duration(self) -> float:
-        return (len(self._rows) - 1) * self.step
+        return self._ends[-1] * self.step
+
+    def _move_rows(self, m: int) -> list[Row]:
+        """The rows of move ``m`` after its start row (the last few moves' kept)."""
+        rows = self._cache.get(m)
+        if rows is None:
+            if len(self._cache) >= 4:
+                del self._cache[next(iter(self._cache))]
+            rows = self._cache[m] = integrate_move(self._starts[m], self.moves[m], self.accel,
+                                                   self.step)
+        return rows
 
     def state(self, t: float) -> PersonState:
+        last = self._ends[-1]
         s = max(t, 0.0) / self.step
-        i = min(int(s), len(self._rows) - 2)
-        frac = min(s - i, 1.0)
-        a, b = self._rows[i], self._rows[i + 1]
-        if s >= len(self._rows) - 1:
-            x, y, th, _, _ = self._rows[-1]
+        if s >= last:
+            x, y, th, _, _ = self._final
             return PersonState(x, y, wrap_pi(th), 0.0, 0.0)
+        i = min(int(s), last - 1)
+        frac = min(s - i, 1.0)
+        m = bisect.bisect_left(self._ends, i + 1)      # the move of grid rows i + 1
+        first = self._ends[m - 1] if m else 0          # its start row
+        rows = self._move_rows(m)
+        a, b = (self._starts[m] if i == first else rows[i - first - 1]), rows[i - first]
         x, y, th, v = (a[j] + frac * (b[j] - a[j]) for j in range(4))
         return PersonState(x, y, wrap_pi(th), v, b[4])

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import math
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -18,7 +19,7 @@ from scipy.interpolate import make_smoothing_spline
 
 from companion.errors import DataError
 from companion.geometry import wrap_pi
-from companion.io import parse_number
+from companion.io import MAX_CELL, parse_number
 from companion.types import PersonState
 
 #: Column names a person CSV must have, in this order.
@@ -271,18 +272,46 @@ def load_person_csv(path: str | Path, smoothing: float = DEFAULT_SMOOTHING,
     return RecordedPerson(t, x, y, smoothing, standing_speed, grid_step)
 
 
-def read_person_csv(path: str | Path) -> tuple[list[float], list[float], list[float]]:
-    """Read and validate the samples of a person CSV (see :func:`load_person_csv`)."""
+def read_person_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Read and validate the samples of a person CSV (see :func:`load_person_csv`).
+
+    A well-formed file is read by numpy's compiled CSV reader, without a Python object per
+    row (a million rows in about a second); a file it rejects, or whose numbers fail a check,
+    is read again row by row, which names the first bad line."""
     name = str(path)
     try:
         with open(path, newline="", encoding="utf-8-sig") as f:
-            return _parse_rows(name, csv.reader(f))
+            fast = _parse_fast(f)
+        if fast is not None:
+            return fast
+        with open(path, newline="", encoding="utf-8-sig") as f:
+            return tuple(np.array(c) for c in _parse_rows(name, csv.reader(f)))
     except OSError as e:
         raise DataError(f"{name}: cannot read file: {e.strerror or e}") from None
     except UnicodeDecodeError as e:
         raise DataError(f"{name}: not a UTF-8 text file ({e.reason})") from None
     except csv.Error as e:
         raise DataError(f"{name}: malformed CSV: {e}") from None
+
+
+def _parse_fast(f) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The samples of a well-formed person CSV read at once, or None for anything else
+    (:func:`_parse_rows` then finds what is wrong)."""
+    header = f.readline()
+    while header and not header.strip():
+        header = f.readline()
+    if tuple(c.strip() for c in header.split(",")) != CSV_COLUMNS:
+        return None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")     # "input contained no data"
+            data = np.loadtxt(f, delimiter=",", comments=None, ndmin=2)
+    except (ValueError, UserWarning):
+        return None
+    if data.shape[1] != len(CSV_COLUMNS) or len(data) < MIN_SAMPLES \
+            or not np.all(np.abs(data) <= MAX_CELL) or not np.all(np.diff(data[:, 0]) > 0.0):
+        return None
+    return data[:, 0].copy(), data[:, 1].copy(), data[:, 2].copy()
 
 
 def _parse_rows(name: str, reader) -> tuple[list[float], list[float], list[float]]:

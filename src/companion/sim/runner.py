@@ -14,7 +14,7 @@ import multiprocessing
 import os
 import signal
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from functools import partial
@@ -24,7 +24,7 @@ from companion._jit import compile_lock
 from companion.control import make_controller
 from companion.errors import ConfigError
 from companion.params import Params
-from companion.sim.episode import run_episode
+from companion.sim.episode import BLOCK_ROWS, episode_blocks
 from companion.sim.faults import Fault
 from companion.sim.person import PersonMotion, line
 from companion.sim.sensing import make_perception
@@ -51,11 +51,17 @@ class EpisodeSpec:
 
 def run_one(spec: EpisodeSpec) -> Log:
     """Simulate one episode of the standard stack of ``spec.controller``."""
-    return run_episode(make_controller(spec.controller, spec.params), spec.person, spec.params,
-                       spec.duration, start=spec.start, seed=spec.seed,
-                       obstacles=spec.obstacles,
-                       perception=make_perception(spec.obstacle_source, spec.params),
-                       faults=spec.faults, start_velocity=spec.start_velocity)
+    return Log.concat(stream_one(spec))
+
+
+def stream_one(spec: EpisodeSpec, rows: int = BLOCK_ROWS) -> Iterator[Log]:
+    """:func:`run_one`'s log in blocks of ``rows`` rows, yielded as the episode runs
+    (:func:`companion.sim.episode.episode_blocks`): a long episode in bounded memory."""
+    return episode_blocks(make_controller(spec.controller, spec.params), spec.person,
+                          spec.params, spec.duration, start=spec.start, seed=spec.seed,
+                          obstacles=spec.obstacles,
+                          perception=make_perception(spec.obstacle_source, spec.params),
+                          faults=spec.faults, start_velocity=spec.start_velocity, rows=rows)
 
 
 def default_workers() -> int:

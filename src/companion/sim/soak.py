@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.geometry import obstacle_arrays, path_clearance
-from companion.metrics import obstacle_metrics, status_shares
+from companion.metrics import Entries, Running
 from companion.params import Params
 from companion.sim.person import Move, Row, ScriptedWalk, integrate_move
 from companion.sim.runner import EpisodeSpec, run_one
@@ -115,31 +115,59 @@ def make_world(seed: int, duration: float, person_margin: float = 1.2) -> SoakWo
     return SoakWorld(obstacles, random_walk(rng, duration, obstacles, person_margin))
 
 
+class Summary:
+    """The soak's summary over consecutive blocks of its log (one block: the whole log):
+    collisions, closest approaches, finiteness and time shares per status."""
+
+    def __init__(self, params: Params):
+        self.params = params
+        self._metrics = Running()
+        self._person_contacts = Entries()
+        self._finite = True
+
+    def add(self, log: Log) -> None:
+        self._metrics.add(log)
+        dist = np.hypot(log["robot_x"] - log["person_x"], log["robot_y"] - log["person_y"])
+        self._person_contacts.add(dist < self.params.robot.radius
+                                  + self.params.lidar.person_radius)
+        self._finite = self._finite and all(
+            bool(np.all(np.isfinite(a))) for c, a in log.columns.items()
+            if c not in ("status", "reason", "rho_ob"))
+
+    def value(self) -> dict:
+        m = self._metrics.value()
+        return {
+            "duration_s": float(m["steps"] * self.params.dt),
+            "steps": m["steps"],
+            "finite": self._finite,
+            "person_collisions": self._person_contacts.count,
+            "min_person_distance_m": m["min_person_distance_m"],
+            "obstacle_collisions": m["obstacle_collisions"],
+            "min_obstacle_clearance_m": m["min_obstacle_clearance_m"],
+            **{k: m[k] for k in ("share_ok", "share_degraded", "share_stopped")},
+            "rmse_rho_m": m["rmse_rho_m"],
+        }
+
+
 def summarize(log: Log, params: Params) -> dict:
     """Collisions, closest approaches, finiteness and time shares per status."""
-    dist = np.hypot(log["robot_x"] - log["person_x"], log["robot_y"] - log["person_y"])
-    obstacles = obstacle_metrics(log)
-    numeric = [log[c] for c in log.columns if c not in ("status", "reason", "rho_ob")]
-    person_contact = dist < params.robot.radius + params.lidar.person_radius
-    return {
-        "duration_s": float(len(log) * params.dt),
-        "steps": len(log),
-        "finite": bool(all(np.all(np.isfinite(c)) for c in numeric)),
-        "person_collisions": int(person_contact[0]) + int(np.count_nonzero(
-            person_contact[1:] & ~person_contact[:-1])),
-        "min_person_distance_m": float(np.min(dist)),
-        "obstacle_collisions": obstacles["obstacle_collisions"],
-        "min_obstacle_clearance_m": obstacles["min_obstacle_clearance_m"],
-        **status_shares(log),
-        "rmse_rho_m": float(np.sqrt(np.mean(np.square(log["rho"] - log["rho_d"])))),
-    }
+    summary = Summary(params)
+    summary.add(log)
+    return summary.value()
+
+
+def soak_episode(duration: float, seed: int = 0, controller: str = "lqr",
+                 params: Params | None = None) -> EpisodeSpec:
+    """The episode of ``duration`` s in the soak world of ``seed``."""
+    params = params or Params()
+    world = make_world(seed, duration)
+    return EpisodeSpec(controller, world.person, params, duration, seed=seed,
+                       obstacles=world.obstacles)
 
 
 def run_soak(duration: float, seed: int = 0, controller: str = "lqr",
              params: Params | None = None) -> tuple[dict, Log]:
     """Simulate ``duration`` s of the soak world of ``seed``; returns (summary, log)."""
-    params = params or Params()
-    world = make_world(seed, duration)
-    log = run_one(EpisodeSpec(controller, world.person, params, duration, seed=seed,
-                              obstacles=world.obstacles))
-    return summarize(log, params), log
+    spec = soak_episode(duration, seed, controller, params)
+    log = run_one(spec)
+    return summarize(log, spec.params), log
