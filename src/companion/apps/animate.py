@@ -12,7 +12,7 @@ is on PATH). docs/animations.md shows what a frame holds and what making one cos
 from __future__ import annotations
 
 import math
-import os
+import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -50,6 +50,9 @@ HEADING = 0.5
 """Length (m) of the person's heading tick."""
 
 EXTENSIONS = (".gif", ".mp4")
+
+LIDAR = "tab:cyan"
+"""Colour of the LiDAR returns of a single run (several runs: each in its robot's)."""
 
 LATE_LABELS = ("desired slot of R", "LiDAR returns")
 """Legend entries listed after the robots."""
@@ -97,15 +100,13 @@ def target_arg(text: str, flag: str = "--animate") -> Path:
                          f"write a .gif instead")
     if path.is_dir():
         raise UsageError(f"{flag} {text}: is a folder, expected a file name")
-    folder = next((p for p in (path.absolute().parent, *path.absolute().parents)
-                   if p.exists()), None)
-    if folder is None or not folder.is_dir() or not _writable(folder):
-        raise UsageError(f"{flag} {text}: cannot write there")
+    try:                                        # made and tried now, not after the run
+        path.absolute().parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path.absolute().parent):
+            pass
+    except OSError as exc:
+        raise UsageError(f"{flag} {text}: cannot write there ({exc.strerror})") from None
     return path
-
-
-def _writable(folder: Path) -> bool:
-    return os.access(folder, os.W_OK | os.X_OK)
 
 
 def playback(duration: float, fps: int = FPS, max_s: float = MAX_PLAYBACK_S) -> float:
@@ -226,9 +227,9 @@ class _Scene:
                                              "person estimate" if not self.estimates else None,
                                              fill=False, ls=":")
             if sc.obstacle_source == "lidar":
-                (self.scans[name],) = ax.plot([], [], ".", color=color, ms=3, alpha=0.6,
-                                              zorder=3,
-                                              label="LiDAR returns" if not self.scans else None)
+                (self.scans[name],) = ax.plot(
+                    [], [], ".", color=LIDAR if len(runs) == 1 else color, ms=4, zorder=3,
+                    label="LiDAR returns" if not self.scans else None)
         ax.set_aspect("equal", adjustable="box")
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")

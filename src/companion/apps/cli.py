@@ -71,6 +71,8 @@ def parser() -> argparse.ArgumentParser:
     run.add_argument("--out", metavar="DIR", help="output folder (default out/SCENARIO)")
     run.add_argument("--plot", action="store_true", help="also write trajectory.png, "
                      "errors.png, inputs.png (and avoidance.png when there are obstacles)")
+    run.add_argument("--animate", metavar="FILE", help="also draw the run as an animation: "
+                     "FILE.gif, or FILE.mp4 where ffmpeg is on PATH (docs/animations.md)")
     _sensing(run)
     run.set_defaults(func="cmd_run")
 
