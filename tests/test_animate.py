@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from PIL import Image, ImageChops
 
-from companion.apps import animate
+from companion.apps import animate, movie
 from companion.apps.cli import main
 from companion.sim.scenario import load_scenario, run_scenario
 from companion.types import Circle
@@ -99,7 +99,7 @@ def test_an_interrupted_animation_leaves_nothing(tmp_path, monkeypatch, inside):
     def interrupted(self):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(animate._GifWriter, "finish", interrupted)
+    monkeypatch.setattr(movie._GifWriter, "finish", interrupted)
     assert main(["run", "fig4", "--duration", "1", "--out", str(out),
                  "--animate", str(target)]) == 130
     assert not target.exists()
@@ -148,3 +148,22 @@ def test_several_controllers_in_one_animation(tmp_path):
         assert (np.abs(last - rgb).max(axis=1) <= 12).sum() > 50, rgb
     assert ImageChops.difference(Image.fromarray(images[0]), Image.fromarray(images[-1])
                                  ).getbbox() is not None
+
+
+def test_mp4_frames_go_to_ffmpeg_as_raw_rgba(tmp_path, monkeypatch):
+    """ffmpeg is not needed to test the MP4 path: a stand-in records its arguments and the
+    frames it is sent, which must be whole RGBA frames of the size it is told."""
+    fake = tmp_path / "bin" / "ffmpeg"
+    fake.parent.mkdir()
+    fake.write_text('#!/bin/sh\necho "$@" > "$(dirname "$0")/args"\n'
+                    'for last; do :; done\ncat > "$last"\n')
+    fake.chmod(0o755)
+    monkeypatch.setenv("PATH", f"{fake.parent}:/usr/bin:/bin")
+    target = tmp_path / "run.mp4"
+    assert main(["run", "fig4", "--duration", "1", "--out", str(tmp_path / "o"),
+                 "--animate", str(target)]) == 0
+    args = (fake.parent / "args").read_text().split()
+    width, height = map(int, args[args.index("-s") + 1].split("x"))
+    assert args[args.index("-f", args.index("-i")) + 1] == "mp4"
+    assert height == 480 and width % 2 == 0
+    assert target.stat().st_size == 10 * width * height * 4

@@ -5,30 +5,26 @@ returns, the recent paths, the time and the supervisor's status when it is not o
 
 Frames are taken every ``speed / fps`` simulated seconds: real time (``speed`` 1) for runs up
 to :data:`MAX_PLAYBACK_S`, longer runs faster, so an animation never has more than
-``MAX_PLAYBACK_S * fps`` frames. GIFs are written with Pillow, MP4s with ffmpeg (only where it
-is on PATH). docs/animations.md shows what a frame holds and what making one costs.
+``MAX_PLAYBACK_S * fps`` frames. GIFs are written with Pillow, MP4s with ffmpeg where it is
+on PATH (:mod:`companion.apps.movie`). docs/animations.md: what a frame holds, what it costs.
 """
 
 from __future__ import annotations
 
 import math
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from matplotlib import animation
 from matplotlib.patches import Circle as Circle2D
-from PIL import Image
 
-from companion.apps import plots
-from companion.apps.args import UsageError
+from companion.apps import movie, plots
 from companion.control.slot import slot_point
-from companion.io import atomic_write
 from companion.params import Params
 from companion.sim.lidar import cast, scan_points
 from companion.sim.scenario import Scenario
+from companion.sim.sensing import LidarPerception
 from companion.types import Circle, Log, PersonState, Pose, Wall
 
 FPS = 10
@@ -48,8 +44,6 @@ WINDOW = 12.0
 
 HEADING = 0.5
 """Length (m) of the person's heading tick."""
-
-EXTENSIONS = (".gif", ".mp4")
 
 LIDAR = "tab:cyan"
 """Colour of the LiDAR returns of a single run (several runs: each in its robot's)."""
@@ -82,33 +76,6 @@ def scene_box(xlim: tuple[float, float], ylim: tuple[float, float]
     return axes_w, (cx - hx, cx + hx), (cy - hy, cy + hy)
 
 
-def _even_inches(width: float) -> float:
-    """``width`` (in) rounded up to an even number of pixels (h264 needs them)."""
-    return 2 * math.ceil(width * DPI / 2) / DPI
-
-
-def target_arg(text: str, flag: str = "--animate") -> Path:
-    """The animation file named by ``flag``, checked before any work: a .gif, or a .mp4 when
-    ffmpeg is on PATH, in a folder that exists (or can be made) and can be written."""
-    path = Path(text)
-    suffix = path.suffix.lower()
-    if suffix not in EXTENSIONS:
-        raise UsageError(f"{flag} {text}: expected a file name ending in .gif or .mp4, got "
-                         f"{path.suffix or 'no extension'!r}")
-    if suffix == ".mp4" and not animation.FFMpegWriter.isAvailable():
-        raise UsageError(f"{flag} {text}: .mp4 needs ffmpeg on PATH, which is not there; "
-                         f"write a .gif instead")
-    if path.is_dir():
-        raise UsageError(f"{flag} {text}: is a folder, expected a file name")
-    try:                                        # made and tried now, not after the run
-        path.absolute().parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=path.absolute().parent):
-            pass
-    except OSError as exc:
-        raise UsageError(f"{flag} {text}: cannot write there ({exc.strerror})") from None
-    return path
-
-
 def playback(duration: float, fps: int = FPS, max_s: float = MAX_PLAYBACK_S) -> float:
     """Playback speed (x real time): 1 up to ``max_s`` of run, else the whole number that
     keeps the playback within ``max_s``."""
@@ -129,10 +96,10 @@ def frame_indices(t: np.ndarray, fps: int = FPS, speed: float = 1.0) -> np.ndarr
 def lidar_returns(log: Log, k: int, sc: Scenario) -> np.ndarray:
     """World points (k, 2) of the scan the controller held at row ``k``: re-cast without
     noise from the logged robot pose and person of the row the scan was taken at (every
-    ``round(1 / (lidar_rate_hz * dt))`` rows, as in :class:`companion.sim.sensing.
-    LidarPerception`) against the scenario's obstacles."""
+    ``LidarPerception.every`` rows, :class:`companion.sim.sensing.LidarPerception`) against
+    the scenario's obstacles."""
     p = sc.params
-    every = max(1, round(1.0 / (p.sensing.lidar_rate_hz * p.dt)))
+    every = LidarPerception(p).every
     j = k - k % every
     circles = [ob for ob in sc.obstacles if isinstance(ob, Circle)]
     walls = [ob for ob in sc.obstacles if isinstance(ob, Wall)]
@@ -248,7 +215,7 @@ class _Scene:
                                  loc="upper left", fontsize=8, bbox_transform=inches,
                                  bbox_to_anchor=(LEFT + axes_w + 0.1, HEIGHT - TOP))
         wide = legend.get_window_extent(self.fig.canvas.get_renderer()).width / DPI
-        width = _even_inches(LEFT + axes_w + 0.2 + wide)
+        width = movie.even_inches(LEFT + axes_w + 0.2 + wide, DPI)
         self.fig.set_size_inches(width, HEIGHT)
         ax.set_position((LEFT / width, BOTTOM / HEIGHT, axes_w / width,
                          (HEIGHT - BOTTOM - TOP) / HEIGHT))
@@ -308,58 +275,6 @@ class _Scene:
             self.ax.set_ylim(py - h, py + h)
 
 
-def _palette(frame: Image.Image) -> Image.Image:
-    """A palette for every frame: the first frame's commonest colours exactly (white, the
-    grid, the fills and lines: no tinted background), then a median cut of it for the
-    anti-aliased blends, leaving out colours within 8 levels of one kept (Pillow's palette
-    lookup would mistake them for each other)."""
-    common = [rgb for _, rgb in sorted(frame.getcolors(frame.width * frame.height),
-                                       reverse=True)[:96]]
-    cut = frame.quantize(colors=160, method=Image.Quantize.MEDIANCUT).getpalette()
-    kept: list[tuple[int, ...]] = []
-    for rgb in [*common, *zip(cut[0::3], cut[1::3], cut[2::3])]:
-        if len(kept) < 256 and all(max(abs(a - b) for a, b in zip(rgb, k)) > 8 for k in kept):
-            kept.append(tuple(rgb))
-    palette = Image.new("P", (1, 1))
-    palette.putpalette([c for rgb in kept for c in rgb])
-    return palette
-
-
-class _GifWriter(animation.PillowWriter):
-    """Pillow's GIF writer taking each frame as the canvas already drew it (see
-    :meth:`_Scene.render`), held as an 8-bit palette image on one shared palette (a quarter of
-    the memory, and Pillow then stores only the pixels that change), and naming the format
-    (the file being written has a temporary name)."""
-
-    def setup(self, fig, outfile, dpi=None):
-        super().setup(fig, outfile, dpi=dpi)
-        self._palette: Image.Image | None = None
-
-    def grab_frame(self, **savefig_kwargs):
-        canvas = self.fig.canvas
-        frame = Image.frombuffer("RGBA", canvas.get_width_height(), canvas.buffer_rgba(),
-                                 "raw", "RGBA", 0, 1).convert("RGB")
-        if self._palette is None:
-            self._palette = _palette(frame)
-        self._frames.append(frame.quantize(palette=self._palette, dither=Image.Dither.NONE))
-
-    def finish(self):
-        self._frames[0].save(self.outfile, format="GIF", save_all=True,
-                             append_images=self._frames[1:], duration=round(1000 / self.fps),
-                             loop=0)
-
-
-class _Mp4Writer(animation.FFMpegWriter):
-    """ffmpeg's writer taking each frame as the canvas already drew it, in MP4 whatever the
-    file's (temporary) name."""
-
-    def __init__(self, fps: int):
-        super().__init__(fps=fps, extra_args=["-f", "mp4"])
-
-    def grab_frame(self, **savefig_kwargs):
-        self._proc.stdin.write(self.fig.canvas.buffer_rgba())
-
-
 def save(path: str | Path, runs: Mapping[str, Log], sc: Scenario, title: str = "",
          fps: int = FPS, max_playback_s: float = MAX_PLAYBACK_S) -> int:
     """Write the animation of ``runs`` (logs of scenario ``sc`` by controller name, sharing
@@ -373,16 +288,8 @@ def save(path: str | Path, runs: Mapping[str, Log], sc: Scenario, title: str = "
     dt = float(t[1] - t[0]) if len(t) > 1 else 1.0
     scene = _Scene(runs, sc, title or f"{sc.name}: {', '.join(runs)}", speed,
                    int(round(TRAIL_S / dt)))
-    writer = _Mp4Writer(fps) if path.suffix.lower() == ".mp4" else _GifWriter(fps=fps)
-
-    def write(tmp: Path) -> None:
-        with writer.saving(scene.fig, str(tmp), dpi=scene.fig.dpi):
-            for k in rows:
-                scene.render(int(k))
-                writer.grab_frame()
-
     try:
-        atomic_write(path, write)
+        movie.write(path, scene.fig, scene.render, rows, fps)
     finally:
         plots.close(scene.fig)
     return len(rows)

@@ -16,7 +16,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from companion import metrics
-from companion.apps import animate, benchmark, plots, reproduce, table3, tune
+from companion.apps import animate, benchmark, movie, plots, reproduce, table3, tune
 from companion.apps import pedestrians as walkers
 from companion.apps.args import (
     UsageError,
@@ -106,15 +106,15 @@ def cmd_run(args: argparse.Namespace) -> int:
     lookup(sc.controller)  # unknown names: ConfigError with a hint
     checked_controllers([sc.controller], sc.params, args.params or sc.source)
     out = output_dir(Path(args.out or Path("out") / sc.name))
-    movie = animate.target_arg(args.animate) if args.animate else None
+    target = movie.target_arg(args.animate) if args.animate else None
     log = run_scenario(sc)
     m = metrics.compute(log)
     m["scenario"] = sc.name
     m["controller"] = sc.controller
     with Outputs(out, "run") as stage:
         written = _write_run(stage, sc, args.plot, log, m)
-        if movie is not None:
-            written.append(animate.save_run(movie, out, stage, sc, log))
+        if target is not None:
+            written.append(animate.save_run(target, out, stage, sc, log))
     # Everything is written before anything is printed: a reader that goes away early
     # (| head) cannot cut the outputs short.
     print(f"{sc.name}: {sc.description}")
