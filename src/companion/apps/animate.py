@@ -83,8 +83,8 @@ def playback(duration: float, fps: int = FPS, max_s: float = MAX_PLAYBACK_S) -> 
 
 
 def frame_indices(t: np.ndarray, fps: int = FPS, speed: float = 1.0) -> np.ndarray:
-    """Log rows shown as frames: the first row at or after each frame time ``i * speed / fps``
-    (``t`` evenly sampled from 0)."""
+    """Log rows shown as frames: the row nearest each frame time ``i * speed / fps`` (``t``
+    evenly sampled from 0)."""
     if len(t) < 2:
         return np.zeros(len(t), dtype=int)
     dt = float(t[1] - t[0])
