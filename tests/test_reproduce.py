@@ -26,9 +26,17 @@ def test_files(out):
     for name in ("table2.csv", "table2.md", "table3.csv", "table3.md", "fig3.csv", "fig4.csv",
                  "fig3_0.5mps.png", "fig3_1mps.png", "fig4a_trajectories.png", "fig4b_errors.png",
                  "fig4c_inputs.png", "fig4d_avoidance.png", "fig7a_trajectories.png",
-                 "fig7d_avoidance.png"):
+                 "fig7d_avoidance.png", "fig4.gif"):
         assert (out / name).stat().st_size > 0, name
     assert not list(out.glob(".*.tmp"))
+
+
+def test_fig4_animation_is_the_whole_lap_at_twice_real_time_and_small(out):
+    from PIL import Image
+
+    with Image.open(out / "fig4.gif") as im:
+        assert im.n_frames == 300 and im.info["duration"] == 100      # 60 s at 2x, 10 fps
+    assert (out / "fig4.gif").stat().st_size < 3_000_000
 
 
 def test_table2_has_every_controller_and_trajectory(out):

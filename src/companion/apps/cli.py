@@ -73,6 +73,8 @@ def parser() -> argparse.ArgumentParser:
                      "errors.png, inputs.png (and avoidance.png when there are obstacles)")
     run.add_argument("--bag", metavar="DIR", help="also record the run as a ROS 2 bag (MCAP) "
                      "with a Foxglove scene, through the ROS 2 node (docs/recording.md)")
+    run.add_argument("--animate", metavar="FILE", help="also draw the run as an animation: "
+                     "FILE.gif, or FILE.mp4 where ffmpeg is on PATH (docs/animations.md)")
     _sensing(run)
     run.set_defaults(func="cmd_run")
 

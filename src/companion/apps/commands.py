@@ -17,7 +17,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from companion import metrics
-from companion.apps import benchmark, plots, reproduce, table3, tune
+from companion.apps import animate, benchmark, movie, plots, reproduce, table3, tune
 from companion.apps import pedestrians as walkers
 from companion.apps.args import (
     UsageError,
@@ -113,14 +113,22 @@ def cmd_run(args: argparse.Namespace) -> int:
     lookup(sc.controller)  # unknown names: ConfigError with a hint
     checked_controllers([sc.controller], sc.params, args.params or sc.source)
     out = output_dir(Path(args.out or Path("out") / sc.name))
+    target = movie.target_arg(args.animate) if args.animate else None
     if args.bag:                            # the episode runs over the recorded graph
         from companion.apps.bags import bag_arg, run_recorded
 
         blocks = iter([run_recorded(sc, bag_arg(args.bag))])
     else:
         blocks = started(stream_one(sc.episode()))
+    if target is not None:                  # an animation needs the whole log at the end
+        blocks = iter([Log.concat(list(blocks))])
     with Outputs(out, "run") as stage:      # the log goes to disk as the episode runs
-        m, written = _write_run(stage, sc, args.plot, blocks)
+        if target is None:
+            m, written = _write_run(stage, sc, args.plot, blocks)
+        else:
+            log = next(blocks)
+            m, written = _write_run(stage, sc, args.plot, [log])
+            written.append(animate.save_run(target, out, stage, sc, log))
     # Everything is written before anything is printed: a reader that goes away early
     # (| head) cannot cut the outputs short.
     print(f"{sc.name}: {sc.description}")
@@ -267,8 +275,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     print("Table 3 (realistic sensing, mean over seeds; paper's LQR on the real robot at the "
           "right):")
     print(table3.text(result.table3))
-    print(f"wrote table2.csv, table2.md, table3.csv, table3.md, fig3.csv, fig4.csv and the "
-          f"Fig. 3, 4, 7 PNGs in {out}")
+    print(f"wrote table2.csv, table2.md, table3.csv, table3.md, fig3.csv, fig4.csv, the "
+          f"Fig. 3, 4, 7 PNGs and fig4.gif in {out}")
     return 0
 
 

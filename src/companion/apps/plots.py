@@ -51,7 +51,8 @@ Runs = Mapping[str, Log]
 """Logs of the same scenario by controller name (they share the person)."""
 
 
-def _colors(runs: Runs) -> dict[str, str]:
+def colors(runs: Runs) -> dict[str, str]:
+    """A colour per run: purple for one, else the Fig. 4 palette in order."""
     if len(runs) == 1:
         return {name: ROBOT for name in runs}
     palette = ["tab:purple", "tab:green", "tab:orange", "tab:pink", "tab:blue", "tab:brown"]
@@ -73,7 +74,7 @@ def trajectories(runs: Runs, title: str = "", marker_period_s: float = 2.0,
     ax.plot(first["person_x"], first["person_y"], color=PERSON, lw=2, label="person")
     _headings(ax, first["person_x"], first["person_y"], first["person_theta"], every, PERSON)
     ax.plot(first["person_x"][0], first["person_y"][0], "o", color=PERSON, label="start")
-    for (name, log), color in zip(runs.items(), _colors(runs).values()):
+    for (name, log), color in zip(runs.items(), colors(runs).values()):
         ax.plot(log["robot_x"], log["robot_y"], color=color, lw=1.5, ls="--", label=name)
         _headings(ax, log["robot_x"], log["robot_y"], log["robot_theta"], every, color)
         ax.plot(log["robot_x"][0], log["robot_y"][0], "o", color=color)
@@ -89,7 +90,7 @@ def trajectories(runs: Runs, title: str = "", marker_period_s: float = 2.0,
 def errors_over_time(runs: Runs, title: str = "") -> Figure:
     """rho, alpha and beta errors over time (Fig. 4(b)); with one run, beta_ref dotted."""
     fig, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True, layout="constrained")
-    for (name, log), color in zip(runs.items(), _colors(runs).values()):
+    for (name, log), color in zip(runs.items(), colors(runs).values()):
         e = errors(log)
         axes[0].plot(log["t"], e["rho"], color=color, label=name)
         axes[1].plot(log["t"], e["alpha"], color=color)
@@ -120,7 +121,7 @@ def inputs_over_time(runs: Runs, params: Params, title: str = "") -> Figure:
                                     (axes[1], "omega", "person_omega", params.robot.omega_max,
                                      "rad/s")):
         ax.plot(first["t"], first[pkey], color=PERSON, lw=1.5, label="person")
-        for (name, log), color in zip(runs.items(), _colors(runs).values()):
+        for (name, log), color in zip(runs.items(), colors(runs).values()):
             ax.plot(log["t"], log[key], color=color, lw=1.2, label=name)
         for s in (-1, 1):
             ax.axhline(s * lim, color="k", ls="--", lw=0.8)
@@ -137,7 +138,7 @@ def avoidance_over_time(runs: Runs, obstacles: Sequence[Obstacle], params: Param
     """Fig. 4(d): the avoidance output u_ob and the clearance rho_ob to the nearest obstacle
     over time, with the influence range(s) dashed."""
     fig, axes = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True, layout="constrained")
-    for (name, log), color in zip(runs.items(), _colors(runs).values()):
+    for (name, log), color in zip(runs.items(), colors(runs).values()):
         axes[0].plot(log["t"], log["u_ob"], color=color, label=name)
         axes[1].plot(log["t"], log["rho_ob"], color=color)
     axes[0].set_ylabel("u_ob (rad/s)")
@@ -169,18 +170,18 @@ def convergence(runs: Sequence[tuple[str, str, Log]], title: str = "") -> Figure
     err_axes = {side: [fig.add_subplot(grid[i + 1, col]) for i in range(3)]
                 for side, col in (("right", 0), ("left", 1))}
     labels = list(dict.fromkeys(label for label, _, _ in runs))
-    colors = {label: plt.cm.tab10(i % 10) for i, label in enumerate(labels)}
+    shades = {label: plt.cm.tab10(i % 10) for i, label in enumerate(labels)}
     first = runs[0][2]
     ax_traj.plot(first["person_x"], first["person_y"], color=PERSON, lw=2.5, label="person")
     for label, side, log in runs:
-        c = colors[label]
+        c = shades[label]
         ax_traj.plot(log["robot_x"], log["robot_y"], ls="--", lw=1, color=c)
         ax_traj.plot(log["robot_x"][0], log["robot_y"][0], "o", color=c, ms=4)
         e = errors(log)
         for ax, key in zip(err_axes[side], ("rho", "alpha", "beta_ref")):
             ax.plot(log["t"], e[key], color=c, lw=1)
     for label in labels:
-        ax_traj.plot([], [], color=colors[label], ls="--", label=f"start {label}")
+        ax_traj.plot([], [], color=shades[label], ls="--", label=f"start {label}")
     ax_traj.set_aspect("equal", adjustable="box")
     ax_traj.set_xlabel("x (m)")
     ax_traj.set_ylabel("y (m)")

@@ -1,5 +1,6 @@
-"""``companion reproduce``: the paper's Fig. 3, Table 2, Fig. 4, Fig. 7 and Table 3 (with
-realistic sensing, :mod:`companion.apps.table3`), side by side.
+"""``companion reproduce``: the paper's Fig. 3, Table 2, Fig. 4 (also as an animation,
+fig4.gif), Fig. 7 and Table 3 (with realistic sensing, :mod:`companion.apps.table3`), side by
+side.
 
 Every number comes from a simulation run here; the paper's published Table 2 is kept beside
 ours for comparison (:data:`PAPER_TABLE2`, in the paper's units).
@@ -13,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from companion import metrics
-from companion.apps import plots, table3
+from companion.apps import animate, plots, table3
 from companion.control import CONTROLLERS
 from companion.io import save_figure, write_csv, write_text
 from companion.params import Params
@@ -154,13 +155,15 @@ def reproduce(out: Path, workers: int | None = None, progress: Progress | None =
     write_csv(out / "table2.csv", TABLE2_COLUMNS,
               ([r.trajectory, r.controller, *r.values()] for r in rows))
     write_text(out / "table2.md", table2_markdown(rows))
-    fig4 = fig4_rows(fig4_runs)
-    write_csv(out / "fig4.csv", FIG4_COLUMNS, fig4)
+    fig4_table = fig4_rows(fig4_runs)
+    write_csv(out / "fig4.csv", FIG4_COLUMNS, fig4_table)
     _scenario_figures(out, "fig4", fig4_runs)
+    animate.save(out / "fig4.gif", fig4_runs, fig4, "Fig. 4: figure-8 with an obstacle, "
+                 "every controller")
     _scenario_figures(out, "fig7", {"lqr": fig7_log})
     write_csv(out / "table3.csv", table3.COLUMNS, table3_rows)
     write_text(out / "table3.md", table3.markdown(table3_rows))
-    return Reproduction(rows, fig3_rows, fig4, table3_rows)
+    return Reproduction(rows, fig3_rows, fig4_table, table3_rows)
 
 
 FIG4_COLUMNS = ("controller", "obstacle_collisions", "min_obstacle_clearance_m",
