@@ -2,19 +2,21 @@
 
 from __future__ import annotations
 
+from companion._jit import jitable
 from companion.params import Params
 
 
+@jitable
 def limit_rate(target: float, prev: float, grow: float, shrink: float, dt: float) -> float:
     """The value closest to ``target`` reachable from ``prev`` in ``dt`` when ``|x|`` may grow
     at most at rate ``grow`` and shrink at most at rate ``shrink`` (crossing zero: shrink to
     0 first, then grow for the rest of the period)."""
-    if prev < 0.0:
-        return -limit_rate(-target, -prev, grow, shrink, dt)
+    sign = -1.0 if prev < 0.0 else 1.0       # mirror a negative prev onto a positive one
+    target, prev = sign * target, sign * prev
     hi = prev + grow * dt
     to_zero = prev / shrink
     lo = prev - shrink * dt if to_zero >= dt else -grow * (dt - to_zero)
-    return min(max(target, lo), hi)
+    return sign * min(max(target, lo), hi)
 
 
 def limit(target: tuple[float, float], prev: tuple[float, float], params: Params

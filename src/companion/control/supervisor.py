@@ -115,7 +115,8 @@ class SafetySupervisor:
             self._far_since = None    # a stop restarts the slot-error clock
         else:
             self._check_slot(obs.robot, estimate, reasons)
-            target = keep_out(target, obs.robot, estimate, obstacles, velocity, p, reasons)
+            target = keep_out(target, obs.robot, estimate, obstacles, velocity, p, reasons,
+                              self._prev)
         self._prev = limit(target[:2], self._prev, p)
         final = Command(*self._prev, target[2])
         if stepped:
