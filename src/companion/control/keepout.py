@@ -37,6 +37,7 @@ from typing import NamedTuple
 import numpy as np
 
 from companion._jit import jitable, kernel
+from companion.control.stopping import stop_path_target
 from companion.geometry import (
     ObstacleArrays,
     clearance,
@@ -46,7 +47,6 @@ from companion.geometry import (
     segment_point,
     unicycle_step,
 )
-from companion.control.stopping import stop_path_target
 from companion.params import Params
 from companion.types import Circle, Obstacle, PersonEstimate, PersonState, Pose
 
@@ -193,22 +193,32 @@ def person_interval(robot: Pose, person: PersonState, params: Params, reasons: l
     return speed_bound(robot.theta, nx, ny, max(approach, 0.0), allowed)
 
 
+def obstacle_bounds(robot: Pose, obstacles: Sequence[Obstacle], params: Params,
+                    actual: float | None = None) -> list[tuple[float, float]]:
+    """Rule 3 towards the obstacles: per obstacle, the interval of ``v`` from which braking
+    stops ``keepout.contact_margin`` short of it (see :func:`braking_bound`)."""
+    s, tau = params.supervisor, params.sensing.actuator_tau_s
+    rate = min(s.accel_max, s.decel_max)
+    delay = reaction_delay(params) - (0.0 if actual is None else tau)
+    bounds = []
+    for nx, ny, gap in obstacle_normals(robot, obstacles, params.robot.radius):
+        gap -= params.keepout.contact_margin + lag_travel(robot, actual, nx, ny, tau)
+        bounds.append(speed_bound(robot.theta, nx, ny, 0.0, braking_speed(gap, rate, delay)))
+    return bounds
+
+
 def braking_bound(v: float, robot: Pose, person: PersonState, obstacles: Sequence[Obstacle],
                   params: Params, reasons: list[str], grow: float = 0.0,
                   actual: float | None = None) -> float:
-    """Rule 3: ``v`` limited by the protective zone (grown by ``grow`` m) and the
-    braking-distance bounds, reacting :func:`reaction_delay` late.
+    """Rule 3: ``v`` limited by the protective zone (grown by ``grow`` m,
+    :func:`person_interval`) and the braking-distance bounds (:func:`obstacle_bounds`),
+    reacting :func:`reaction_delay` late.
 
     With the robot's ``actual`` speed (odometry) the actuator lag counts as the distance the
     lag carries the robot on at that speed (:func:`lag_travel`), not as time at ``v``: a
     robot that is braking moves faster than its command."""
-    s, tau = params.supervisor, params.sensing.actuator_tau_s
-    rate = min(s.accel_max, s.decel_max)
-    delay = reaction_delay(params) - (0.0 if actual is None else tau)
-    bounds = [person_interval(robot, person, params, reasons, grow, actual)]
-    for nx, ny, gap in obstacle_normals(robot, obstacles, params.robot.radius):
-        gap -= params.keepout.contact_margin + lag_travel(robot, actual, nx, ny, tau)
-        bounds.append(speed_bound(robot.theta, nx, ny, 0.0, braking_speed(gap, rate, delay)))
+    bounds = [person_interval(robot, person, params, reasons, grow, actual),
+              *obstacle_bounds(robot, obstacles, params, actual)]
     return clip_to(v, bounds, params.robot.v_max)
 
 
@@ -353,8 +363,9 @@ def keep_out(target: tuple[float, float, float], robot: Pose, estimate: PersonEs
         if evade is not None:
             (v, w), u_ob = evade, 0.0
             reasons.append("evasive")
-    v = braking_bound(v, robot, person, obstacles, params, reasons, grow, v_now[0])
-    allowed = person_interval(robot, person, params, [], grow, v_now[0])
+    allowed = person_interval(robot, person, params, reasons, grow, v_now[0])
+    v = clip_to(v, [allowed, *obstacle_bounds(robot, obstacles, params, v_now[0])],
+                params.robot.v_max)
     stop = stop_path_target((v, w), robot, v_now, v_now if prev is None else prev, obstacles,
                             params, allowed)
     if stop is not None:

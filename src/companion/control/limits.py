@@ -19,11 +19,19 @@ def limit_rate(target: float, prev: float, grow: float, shrink: float, dt: float
     return sign * min(max(target, lo), hi)
 
 
+@jitable
+def reachable(target: float, prev: float, grow: float, shrink: float, bound: float,
+              dt: float) -> float:
+    """``target`` after one period's rate limit from ``prev`` (:func:`limit_rate`) and the
+    bound ``|x| <= bound``: one axis of :func:`limit`."""
+    return min(max(limit_rate(target, prev, grow, shrink, dt), -bound), bound)
+
+
 def limit(target: tuple[float, float], prev: tuple[float, float], params: Params
           ) -> tuple[float, float]:
     """``target`` (v, omega) after the acceleration limits from ``prev``, one period ``dt``
     on, then the velocity limits."""
     s, r, dt = params.supervisor, params.robot, params.dt
-    v = limit_rate(target[0], prev[0], s.accel_max, s.decel_max, dt)
-    w = limit_rate(target[1], prev[1], s.angular_accel_max, s.angular_accel_max, dt)
-    return (min(max(v, -r.v_max), r.v_max), min(max(w, -r.omega_max), r.omega_max))
+    return (reachable(target[0], prev[0], s.accel_max, s.decel_max, r.v_max, dt),
+            reachable(target[1], prev[1], s.angular_accel_max, s.angular_accel_max,
+                      r.omega_max, dt))

@@ -31,7 +31,7 @@ from typing import NamedTuple
 import numpy as np
 
 from companion._jit import jitable, kernel
-from companion.control.limits import limit, limit_rate
+from companion.control.limits import limit, limit_rate, reachable
 from companion.geometry import (
     ObstacleArrays,
     clearance,
@@ -125,15 +125,31 @@ def reach(speed: float, robot: Plant, margin: float) -> float:
         + margin + REACH_MARGIN
 
 
-def candidates(prev: tuple[float, float], params: Params) -> np.ndarray:
-    """Commands reachable from ``prev`` within one period: a grid over the box the rate
-    limits allow, with the braking command (the next step of the stop manoeuvre) first."""
-    lo, hi = limit((-math.inf, -math.inf), prev, params), limit((math.inf, math.inf), prev, params)
-    stop = limit((0.0, 0.0), prev, params)
-    vs = np.unique(np.concatenate([[stop[0]], np.linspace(lo[0], hi[0], GRID_POINTS)]))
-    ws = np.unique(np.concatenate([[stop[1]], np.linspace(lo[1], hi[1], GRID_POINTS)]))
-    grid = np.array([(v, w) for v in vs for w in ws])
-    return np.vstack([stop, grid[(grid[:, 0] != stop[0]) | (grid[:, 1] != stop[1])]])
+@jitable
+def command_grid(prev_v: float, prev_w: float, robot: Plant) -> np.ndarray:
+    """Commands reachable from ``(prev_v, prev_w)`` within one period: the braking command
+    (the next step of the stop manoeuvre) first, then a grid of :data:`GRID_POINTS` per axis
+    over the box the rate limits allow, each axis with its braking value added."""
+    dt, n = robot.dt, GRID_POINTS
+    vs, ws = np.empty(n + 1), np.empty(n + 1)
+    vs[0] = reachable(0.0, prev_v, robot.accel, robot.decel, robot.v_max, dt)
+    ws[0] = reachable(0.0, prev_w, robot.w_rate, robot.w_rate, robot.w_max, dt)
+    v_lo = reachable(-math.inf, prev_v, robot.accel, robot.decel, robot.v_max, dt)
+    v_hi = reachable(math.inf, prev_v, robot.accel, robot.decel, robot.v_max, dt)
+    w_lo = reachable(-math.inf, prev_w, robot.w_rate, robot.w_rate, robot.w_max, dt)
+    w_hi = reachable(math.inf, prev_w, robot.w_rate, robot.w_rate, robot.w_max, dt)
+    for j in range(n):
+        vs[j + 1] = v_lo + (v_hi - v_lo) * j / (n - 1)
+        ws[j + 1] = w_lo + (w_hi - w_lo) * j / (n - 1)
+    out = np.empty(((n + 1) * (n + 1), 2))
+    for i in range(n + 1):
+        for j in range(n + 1):
+            out[i * (n + 1) + j, 0] = vs[i]
+            out[i * (n + 1) + j, 1] = ws[j]
+    return out
+
+
+_command_grid = kernel(command_grid)
 
 
 def stop_path_target(target: tuple[float, float], robot: Pose, v_now: tuple[float, float],
@@ -145,6 +161,8 @@ def stop_path_target(target: tuple[float, float], robot: Pose, v_now: tuple[floa
     candidate closest to it (in units of v_max and omega_max), preferring those whose ``v``
     lies in ``allowed`` (the person's braking interval). ``v_now`` is the robot's actual
     velocity."""
+    if not obstacles:
+        return None
     model = plant(params)
     need = params.keepout.contact_margin + sample_dip(model)
     far = reach(v_now[0], model, need)
@@ -152,17 +170,20 @@ def stop_path_target(target: tuple[float, float], robot: Pose, v_now: tuple[floa
     if not near:
         return None
     nominal = limit(target, prev, params)
-    commands = np.vstack([nominal, candidates(prev, params)])
-    margin = _stop_margins(robot.x, robot.y, robot.theta, float(v_now[0]), float(v_now[1]),
-                           commands, model, obstacle_arrays(near))
-    ok = margin >= min(need, margin[1]) - TOLERANCE      # row 1: the braking command
-    if ok[0]:
+    braking = limit((0.0, 0.0), prev, params)
+    arrays = obstacle_arrays(near)
+    x, y, th, va, wa = robot.x, robot.y, robot.theta, float(v_now[0]), float(v_now[1])
+    first = _stop_margins(x, y, th, va, wa, np.array([nominal, braking]), model, arrays)
+    if first[0] >= min(need, first[1]) - TOLERANCE:
         return None
+    commands = _command_grid(float(prev[0]), float(prev[1]), model)   # row 0: braking
+    margin = _stop_margins(x, y, th, va, wa, commands, model, arrays)
+    ok = margin >= min(need, first[1]) - TOLERANCE
     r = params.robot
     change = np.hypot((commands[:, 0] - nominal[0]) / r.v_max,
                       (commands[:, 1] - nominal[1]) / r.omega_max)
     outside = np.maximum(np.maximum(allowed[0] - commands[:, 0], commands[:, 0] - allowed[1]),
                          0.0)
-    outside = np.where(ok, outside, math.inf)
+    outside = np.where(ok | (np.arange(len(ok)) == 0), outside, math.inf)
     best = int(np.argmin(np.where(outside <= outside.min() + 1e-12, change, math.inf)))
     return float(commands[best, 0]), float(commands[best, 1])
