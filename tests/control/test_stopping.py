@@ -88,14 +88,14 @@ def turning_starts(p):
                 yield (-d * math.cos(th + beta), -d * math.sin(th + beta), th), (1.5, w)
 
 
-def run_start(pose, velocity, p, duration=1.5):
+def run_start(pose, velocity, p, duration):
     """The supervisor around a constant command, the person standing 40 m away; the log."""
     sup = SafetySupervisor(Constant(velocity), p)
     return run_episode(sup, line((-40.0, 0.0, 0.0), 0.0), p, duration, start=Pose(*pose),
                        start_velocity=velocity, obstacles=(PILLAR,))
 
 
-def check_starts(p, every):
+def check_starts(p, every, duration):
     """Starts (every ``every``-th of the grid) whose stop manoeuvre is clear, how many of
     them touch, the deepest touch and the smallest clearance kept beyond what the start's
     stop manoeuvre keeps (min(contact margin, it))."""
@@ -107,7 +107,7 @@ def check_starts(p, every):
         stop = stop_manoeuvre(pose, velocity, velocity, p)
         assert stop > 0.0, (pose, velocity)                 # every start can stop short
         n += 1
-        low = float(np.min(run_start(pose, velocity, p)["rho_ob"]))
+        low = float(np.min(run_start(pose, velocity, p, duration)["rho_ob"]))
         touched += low < 0.0
         deepest = min(deepest, low)
         short = min(short, low - min(p.keepout.contact_margin, stop))
@@ -116,9 +116,10 @@ def check_starts(p, every):
 
 @pytest.mark.parametrize("tau", [0.0, 0.2])
 def test_turning_towards_a_pillar_never_touches_it(tau):
-    """Issue 21: before rule 4, 664 of the 3,675 starts touched the pillar without lag
-    (up to 7.7 cm deep); a subset of 245 here, the full grid below."""
-    n, touched, deepest, short = check_starts(with_lag(NO_BARRIERS, tau), every=15)
+    """Issue 21: before rule 4, with 2 s episodes, 664 of the 3,675 starts touched the pillar
+    without lag (up to 7.7 cm deep) and 1,611 with 0.2 s of lag (up to 13.6 cm); a subset
+    of 245 here, the full grid below."""
+    n, touched, deepest, short = check_starts(with_lag(NO_BARRIERS, tau), 15, 2.0)
     assert n == 245
     assert touched == 0 and deepest == 0.0
     assert short >= -1e-6
@@ -129,7 +130,7 @@ def test_turning_towards_a_pillar_never_touches_it(tau):
 @pytest.mark.parametrize("barriers", [False, True])
 def test_turning_towards_a_pillar_never_touches_it_full_grid(tau, barriers):
     p = with_lag(P if barriers else NO_BARRIERS, tau)
-    n, touched, deepest, short = check_starts(p, every=1)
+    n, touched, deepest, short = check_starts(p, 1, 4.0)      # a full turn at omega_max
     assert n == 3675
     assert touched == 0 and short >= -1e-6
 
