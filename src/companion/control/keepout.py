@@ -13,9 +13,16 @@ The safety supervisor applies them to the controller's target in this order (doc
    the closest safe one of a grid.
 3. **Braking bound** (:func:`braking_bound`): inside ``protective_distance`` the robot may only
    turn or move away; outside it, and towards obstacles, the approach speed is what braking at
-   the rate limit can still stop in time, counting one period of delay.
+   the rate limit can still stop in time, counting one period of delay and the distance the
+   actuator lag carries the robot on at its measured speed.
+4. **Stop path** (:func:`companion.control.stopping.stop_path_target`): last, on the command
+   the others leave, so it checks what is sent. The robot must still be able to brake to a
+   stop along the path it turns along without coming within ``keepout.contact_margin`` of
+   an obstacle; else the closest command (steering too) that can, preferring those within
+   the person's braking interval. Rules 1-3 look along the current heading only, so a turn
+   can outrun them; this one makes the obstacle side hold by construction.
 
-Every rule changes only ``v`` except the evasive check, so the robot can always turn. The
+Rules 1 and 3 change only ``v``, so the robot can always turn. The
 protective distance grows by ``keepout.uncertainty_sigmas`` standard deviations of where the
 person may be by the time the robot reacts (:func:`reaction_std`), and braking counts the
 actuator lag and the detections' latency as reaction time.
@@ -30,6 +37,7 @@ from typing import NamedTuple
 import numpy as np
 
 from companion._jit import jitable, kernel
+from companion.control.stopping import stop_path_target
 from companion.geometry import (
     ObstacleArrays,
     clearance,
@@ -154,31 +162,63 @@ def reaction_delay(params: Params) -> float:
     return params.dt + params.sensing.actuator_tau_s + params.sensing.person_latency_s
 
 
-def braking_bound(v: float, robot: Pose, person: PersonState, obstacles: Sequence[Obstacle],
-                  params: Params, reasons: list[str], grow: float = 0.0) -> float:
-    """Rule 3: ``v`` limited by the protective zone (grown by ``grow`` m) and the
-    braking-distance bounds, reacting :func:`reaction_delay` late."""
+def lag_travel(robot: Pose, actual: float | None, nx: float, ny: float, tau: float) -> float:
+    """Distance (m) the robot's actual speed ``actual`` still carries it against the unit
+    vector ``(nx, ny)`` once its command is zero: ``tau`` times its closing speed (a
+    first-order lag of time constant ``tau`` travels exactly that far beyond its command)."""
+    if actual is None:
+        return 0.0
+    return tau * max(-actual * (math.cos(robot.theta) * nx + math.sin(robot.theta) * ny), 0.0)
+
+
+def person_interval(robot: Pose, person: PersonState, params: Params, reasons: list[str],
+                    grow: float = 0.0, actual: float | None = None) -> tuple[float, float]:
+    """Rule 3 towards the person: the interval of ``v`` the protective zone (grown by ``grow``
+    m) allows (see :func:`braking_bound`)."""
     k, s = params.keepout, params.supervisor
-    rate = min(s.accel_max, s.decel_max)
-    delay = reaction_delay(params)
-    bounds = []
     normal = person_normal(robot, person)
     if normal is None:
         reasons.append("protective_zone")
-        bounds.append((0.0, 0.0))
-    else:
-        nx, ny, dist, approach = normal
-        gap = dist - k.protective_distance - grow
-        if gap <= 0.0:
-            reasons.append("protective_zone")
-            bounds.append(speed_bound(robot.theta, nx, ny, max(approach, 0.0), 0.0))
-        else:
-            net = max(rate - k.person_accel, 0.1 * rate)   # the person may speed up
-            bounds.append(speed_bound(robot.theta, nx, ny, max(approach, 0.0),
-                                      braking_speed(gap, net, delay)))
+        return 0.0, 0.0
+    nx, ny, dist, approach = normal
+    gap = dist - k.protective_distance - grow
+    if gap <= 0.0:
+        reasons.append("protective_zone")
+        return speed_bound(robot.theta, nx, ny, max(approach, 0.0), 0.0)
+    rate = min(s.accel_max, s.decel_max)
+    net = max(rate - k.person_accel, 0.1 * rate)   # the person may speed up
+    tau = params.sensing.actuator_tau_s
+    delay = reaction_delay(params) - (0.0 if actual is None else tau)
+    allowed = braking_speed(gap - lag_travel(robot, actual, nx, ny, tau), net, delay)
+    return speed_bound(robot.theta, nx, ny, max(approach, 0.0), allowed)
+
+
+def obstacle_bounds(robot: Pose, obstacles: Sequence[Obstacle], params: Params,
+                    actual: float | None = None) -> list[tuple[float, float]]:
+    """Rule 3 towards the obstacles: per obstacle, the interval of ``v`` from which braking
+    stops ``keepout.contact_margin`` short of it (see :func:`braking_bound`)."""
+    s, tau = params.supervisor, params.sensing.actuator_tau_s
+    rate = min(s.accel_max, s.decel_max)
+    delay = reaction_delay(params) - (0.0 if actual is None else tau)
+    bounds = []
     for nx, ny, gap in obstacle_normals(robot, obstacles, params.robot.radius):
-        bounds.append(speed_bound(robot.theta, nx, ny, 0.0,
-                                  braking_speed(gap - k.contact_margin, rate, delay)))
+        gap -= params.keepout.contact_margin + lag_travel(robot, actual, nx, ny, tau)
+        bounds.append(speed_bound(robot.theta, nx, ny, 0.0, braking_speed(gap, rate, delay)))
+    return bounds
+
+
+def braking_bound(v: float, robot: Pose, person: PersonState, obstacles: Sequence[Obstacle],
+                  params: Params, reasons: list[str], grow: float = 0.0,
+                  actual: float | None = None) -> float:
+    """Rule 3: ``v`` limited by the protective zone (grown by ``grow`` m,
+    :func:`person_interval`) and the braking-distance bounds (:func:`obstacle_bounds`),
+    reacting :func:`reaction_delay` late.
+
+    With the robot's ``actual`` speed (odometry) the actuator lag counts as the distance the
+    lag carries the robot on at that speed (:func:`lag_travel`), not as time at ``v``: a
+    robot that is braking moves faster than its command."""
+    bounds = [person_interval(robot, person, params, reasons, grow, actual),
+              *obstacle_bounds(robot, obstacles, params, actual)]
     return clip_to(v, bounds, params.robot.v_max)
 
 
@@ -307,10 +347,12 @@ def evasive_target(robot: Pose, current: tuple[float, float], nominal: tuple[flo
 
 def keep_out(target: tuple[float, float, float], robot: Pose, estimate: PersonEstimate,
              obstacles: Sequence[Obstacle], v_now: tuple[float, float], params: Params,
-             reasons: list[str]) -> tuple[float, float, float]:
-    """The target ``(v, omega, u_ob)`` after rules 1-3 (module docstring) for the person
-    ``estimate``; ``v_now`` is the robot's velocity now. Appends "evasive" or
-    "protective_zone" to ``reasons`` when they act."""
+             reasons: list[str], prev: tuple[float, float] | None = None
+             ) -> tuple[float, float, float]:
+    """The target ``(v, omega, u_ob)`` after rules 1-4 (module docstring) for the person
+    ``estimate``; ``v_now`` is the robot's velocity now, ``prev`` the last command (None:
+    ``v_now``). Appends "evasive", "protective_zone" or "stop_path" to ``reasons`` when they
+    act."""
     v, w, u_ob = target
     person = estimate.state
     grow = params.keepout.uncertainty_sigmas * reaction_std(estimate, reaction_delay(params))
@@ -321,4 +363,12 @@ def keep_out(target: tuple[float, float, float], robot: Pose, estimate: PersonEs
         if evade is not None:
             (v, w), u_ob = evade, 0.0
             reasons.append("evasive")
-    return braking_bound(v, robot, person, obstacles, params, reasons, grow), w, u_ob
+    allowed = person_interval(robot, person, params, reasons, grow, v_now[0])
+    v = clip_to(v, [allowed, *obstacle_bounds(robot, obstacles, params, v_now[0])],
+                params.robot.v_max)
+    stop = stop_path_target((v, w), robot, v_now, v_now if prev is None else prev, obstacles,
+                            params, allowed)
+    if stop is not None:
+        (v, w), u_ob = stop, 0.0
+        reasons.append("stop_path")
+    return v, w, u_ob

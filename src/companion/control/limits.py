@@ -2,19 +2,29 @@
 
 from __future__ import annotations
 
+from companion._jit import jitable
 from companion.params import Params
 
 
+@jitable
 def limit_rate(target: float, prev: float, grow: float, shrink: float, dt: float) -> float:
     """The value closest to ``target`` reachable from ``prev`` in ``dt`` when ``|x|`` may grow
     at most at rate ``grow`` and shrink at most at rate ``shrink`` (crossing zero: shrink to
     0 first, then grow for the rest of the period)."""
-    if prev < 0.0:
-        return -limit_rate(-target, -prev, grow, shrink, dt)
+    sign = -1.0 if prev < 0.0 else 1.0       # mirror a negative prev onto a positive one
+    target, prev = sign * target, sign * prev
     hi = prev + grow * dt
     to_zero = prev / shrink
     lo = prev - shrink * dt if to_zero >= dt else -grow * (dt - to_zero)
-    return min(max(target, lo), hi)
+    return sign * min(max(target, lo), hi)
+
+
+@jitable
+def reachable(target: float, prev: float, grow: float, shrink: float, bound: float,
+              dt: float) -> float:
+    """``target`` after one period's rate limit from ``prev`` (:func:`limit_rate`) and the
+    bound ``|x| <= bound``: one axis of :func:`limit`."""
+    return min(max(limit_rate(target, prev, grow, shrink, dt), -bound), bound)
 
 
 def limit(target: tuple[float, float], prev: tuple[float, float], params: Params
@@ -22,6 +32,6 @@ def limit(target: tuple[float, float], prev: tuple[float, float], params: Params
     """``target`` (v, omega) after the acceleration limits from ``prev``, one period ``dt``
     on, then the velocity limits."""
     s, r, dt = params.supervisor, params.robot, params.dt
-    v = limit_rate(target[0], prev[0], s.accel_max, s.decel_max, dt)
-    w = limit_rate(target[1], prev[1], s.angular_accel_max, s.angular_accel_max, dt)
-    return (min(max(v, -r.v_max), r.v_max), min(max(w, -r.omega_max), r.omega_max))
+    return (reachable(target[0], prev[0], s.accel_max, s.decel_max, r.v_max, dt),
+            reachable(target[1], prev[1], s.angular_accel_max, s.angular_accel_max,
+                      r.omega_max, dt))

@@ -12,7 +12,8 @@ and the person estimate. Per call:
 3. robot pose, obstacles and scan (:mod:`companion.control.checks`);
 4. the wrapped controller, on a checked observation predicted to the moment its command takes
    effect (``sensing.actuator_tau_s`` on), the same for every controller;
-5. keep-out rules, with the protective distance grown by the person's uncertainty
+5. keep-out rules, with the protective distance grown by the person's uncertainty, the last
+   of them checking the command as the rate limits will send it against the last command
    (:func:`companion.control.keepout.keep_out`);
 6. rate and velocity limits (:func:`companion.control.limits.limit`); a stopped robot's target
    is zero, so it brakes at the limits.
@@ -117,7 +118,8 @@ class SafetySupervisor:
             self._far_since = None    # a stop restarts the slot-error clock
         else:
             self._check_slot(obs.robot, estimate, reasons)
-            target = keep_out(target, obs.robot, estimate, obstacles, velocity, p, reasons)
+            target = keep_out(target, obs.robot, estimate, obstacles, velocity, p, reasons,
+                              self._prev)
         self._prev = limit(target[:2], self._prev, p)
         final = Command(*self._prev, target[2])
         if stepped:
