@@ -14,6 +14,7 @@ import contextlib
 import dataclasses
 import io
 import math
+import signal
 import tempfile
 import typing
 from pathlib import Path
@@ -95,8 +96,21 @@ def snapshot(folder: Path) -> list:
     return sorted((p.name, p.stat().st_mtime_ns, p.stat().st_size) for p in folder.iterdir())
 
 
+class TooSlow(BaseException):
+    """A case ran for longer than :data:`CASE_LIMIT_S`: the value was not rejected early."""
+
+
+CASE_LIMIT_S = 20.0
+
+
+def _too_slow(signum, frame):
+    raise TooSlow
+
+
 def call(argv: list[str]) -> tuple[object, str, str]:
     out, err = io.StringIO(), io.StringIO()
+    before = signal.signal(signal.SIGALRM, _too_slow)
+    signal.setitimer(signal.ITIMER_REAL, CASE_LIMIT_S)
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         try:
             code = main(argv)
@@ -104,8 +118,13 @@ def call(argv: list[str]) -> tuple[object, str, str]:
             code = exc.code
         except WorkStarted:
             code = "work started"
+        except TooSlow:
+            code = f"still running after {CASE_LIMIT_S:g} s"
         except Exception as exc:               # a crash: exit code 1 and a traceback
-            code = f"raised {type(exc).__name__}: {exc}"
+            code = f"raised {type(exc).__name__}: {str(exc)[:100]}"
+        finally:
+            signal.setitimer(signal.ITIMER_REAL, 0.0)
+            signal.signal(signal.SIGALRM, before)
     return code, out.getvalue(), err.getvalue()
 
 
@@ -179,7 +198,8 @@ def bad_value(f: dataclasses.Field, tp):
         return words | st.booleans() | st.floats(0, 5) | st.just([1])
     n = len(typing.get_args(tp))
     good = [1.0] * n
-    return (st.integers(0, n - 1).flatmap(lambda i: bad_float(check, allows_inf).map(
+    element = bad_float(lambda x: check((x,)), allows_inf)
+    return (st.integers(0, n - 1).flatmap(lambda i: element.map(
         lambda x: good[:i] + [x] + good[i + 1:]))
             | st.lists(st.floats(0.5, 2.0), max_size=6).filter(lambda v: len(v) != n)
             | st.floats(0.5, 2.0))
