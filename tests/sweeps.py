@@ -13,8 +13,9 @@ import os
 
 from hypothesis import HealthCheck, given, settings
 
-#: Examples per family in the default run and in the slow sweep.
-QUICK, SLOW = 40, 1000
+#: Examples per family in the default run and in the slow sweep (``COMPANION_SWEEP_EXAMPLES``
+#: overrides the latter).
+QUICK, SLOW = 40, int(os.environ.get("COMPANION_SWEEP_EXAMPLES", "1000"))
 
 
 def sweep(family: str, strategy, check, examples: int) -> tuple[int, list]:
