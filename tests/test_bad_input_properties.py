@@ -17,6 +17,7 @@ import math
 import os
 import signal
 import tempfile
+import types
 import typing
 from pathlib import Path
 
@@ -98,10 +99,12 @@ def snapshot(folder: Path) -> list:
 
 
 class TooSlow(BaseException):
-    """A case ran for longer than :data:`CASE_LIMIT_S`: the value was not rejected early."""
+    """A case ran for longer than :data:`CASE_LIMIT_S` (work that was not replaced, such as
+    loading a recording of 1e6 s): the value was not rejected early. The limit is generous,
+    for a loaded machine."""
 
 
-CASE_LIMIT_S = float(os.environ.get("COMPANION_CASE_LIMIT_S", "20"))
+CASE_LIMIT_S = float(os.environ.get("COMPANION_CASE_LIMIT_S", "60"))
 
 
 def _too_slow(signum, frame):
@@ -187,7 +190,7 @@ def bad_value(f: dataclasses.Field, tp):
     check, choices = f.metadata.get("check"), f.metadata.get("choices")
     allows_inf = getattr(check, "allows_inf", False)
     args = [a for a in typing.get_args(tp) if a is not type(None)]
-    if typing.get_origin(tp) in (typing.Union, getattr(__import__("types"), "UnionType")):
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
         tp = args[0]
     if tp is float:
         return bad_float(check, allows_inf)

@@ -42,6 +42,9 @@ def param(default: Any, unit: str, doc: str, check: Check | None = None,
 #: Largest magnitude of any number in a configuration (m, s, rad, weights): beyond it a value
 #: is a typo or an attack, and arithmetic on it overflows. A field that accepts ``inf`` says so.
 MAX_MAGNITUDE = 1e6
+#: The longest simulated time (s): a day (a log of about 400 MB). Scenario durations, every
+#: ``--duration`` and the span of a recorded person are at most this.
+MAX_DURATION = 86400.0
 
 
 def positive(x: float) -> str | None:
@@ -150,7 +153,8 @@ def convert(value: Any, tp: Any, name: str, allow_inf: bool = False) -> Any:
             return tuple(convert(v, args[0], f"{name}[{i}]", allow_inf)
                          for i, v in enumerate(value))
         if len(value) != len(args):
-            raise ConfigError(f"{name}: expected {len(args)} values, got {len(value)}")
+            raise ConfigError(f"{name}: expected {len(args)} values, got {len(value)}: "
+                              f"{list(value)!r}")
         return tuple(convert(v, a, f"{name}[{i}]", allow_inf)
                      for i, (v, a) in enumerate(zip(value, args)))
     if origin in (typing.Union, types.UnionType):

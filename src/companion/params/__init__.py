@@ -87,6 +87,18 @@ class Params(Validated):
                     f"inside {name} ({keep:g} m); expected a larger distance or a smaller "
                     f"{name.split('.')[1]}")
 
+        s, tr = self.sensing, self.tracker
+        if s.person_latency_s >= tr.max_delay_s:
+            raise ConfigError(
+                f"sensing.person_latency_s: expected less than tracker.max_delay_s "
+                f"({tr.max_delay_s:g} s; every detection would arrive stale), got "
+                f"{s.person_latency_s!r}")
+        if 1.0 / s.person_rate_hz > tr.lost_after_s:
+            raise ConfigError(
+                f"sensing.person_rate_hz: expected at least 1 / tracker.lost_after_s "
+                f"({1.0 / tr.lost_after_s:g} Hz; the person would be lost between "
+                f"detections), got {s.person_rate_hz!r}")
+
     def replace(self, **changes: Any) -> Params:
         """A copy with top-level fields replaced, validated."""
         out = dataclasses.replace(self, **changes)
