@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from companion.config import Validated, build, load_toml, param, validate
+from companion.config import Validated, build, load_toml, param, ranged, validate
 from companion.errors import ConfigError
 from companion.params.control import (
     BEHIND,
@@ -48,6 +48,7 @@ __all__ = ["BEHIND", "FRONT", "IDEAL", "LEFT", "PROFILES", "REALISTIC", "RIGHT",
            "load_sensing", "params_from_mapping", "sensing_params", "side_to_bearing"]
 
 
+@ranged("[0.001, 1]")
 def _sample_period(x: float) -> str | None:
     return None if 1e-3 <= x <= 1.0 else "a sample period in [0.001, 1] s"
 

@@ -13,27 +13,33 @@ from companion.config import (
     param,
     positive,
     positive_or_inf,
+    ranged,
 )
 from companion.errors import ConfigError
 from companion.geometry import TWO_PI
 
 
+@ranged("(0, 2*pi]")
 def _fov(x: float) -> str | None:
     return None if 0.0 < x <= TWO_PI + 1e-9 else "an angle in (0, 2*pi] rad"
 
 
+@ranged("[0.0001, pi]")
 def _resolution(x: float) -> str | None:
     return None if 1e-4 <= x <= math.pi else "an angle in [0.0001, pi] rad"
 
 
+@ranged("[0, pi/2)")
 def _breakpoint_angle(x: float) -> str | None:
     return None if 0.0 <= x < 0.5 * math.pi else "an angle in [0, pi/2) rad"
 
 
+@ranged("[0, 1)")
 def _dropout(x: float) -> str | None:
     return None if 0.0 <= x < 1.0 else "a probability in [0, 1)"
 
 
+@ranged("(0, 1)")
 def _probability(x: float) -> str | None:
     return None if 0.0 < x < 1.0 else "a probability in (0, 1)"
 
