@@ -151,13 +151,13 @@ class TrackerParams(Validated):
         super().__post_init__()
         for name in ("world_frame", "robot_frame"):
             if not getattr(self, name).strip():
-                raise ConfigError(f"tracker.{name}: expected a frame name, got "
+                raise ConfigError(f"{name}: expected a frame name, got "
                                   f"{getattr(self, name)!r}")
         if self.robot_frame == self.world_frame:
-            raise ConfigError(f"tracker.robot_frame: expected a frame other than "
+            raise ConfigError(f"robot_frame: expected a frame other than "
                               f"world_frame, got {self.robot_frame!r}")
         if self.lost_after_s < self.coast_after_s:
-            raise ConfigError(f"tracker.lost_after_s: expected at least coast_after_s "
+            raise ConfigError(f"lost_after_s: expected at least coast_after_s "
                               f"({self.coast_after_s:g} s), got {self.lost_after_s:g}")
 
 
@@ -216,5 +216,5 @@ class ExtractorParams(Validated):
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.min_radius > self.max_radius:
-            raise ConfigError(f"extractor.min_radius: expected at most max_radius "
+            raise ConfigError(f"min_radius: expected at most max_radius "
                               f"({self.max_radius:g} m), got {self.min_radius:g}")
