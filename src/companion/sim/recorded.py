@@ -305,7 +305,7 @@ def _parse_rows(name: str, reader) -> tuple[list[float], list[float], list[float
             raise DataError(f"{name}:{line}: column 't': {kind} timestamp {values[0]:g}, "
                             f"expected a time after {columns[0][-1]:g} (line {last_line})")
         if columns[0] and values[0] - columns[0][0] > MAX_DURATION:
-            raise DataError(f"{name}:{line}: column 't': timestamp {values[0]:g} is "
+            raise DataError(f"{name}:{line}: column 't': timestamp {values[0]!r} is "
                             f"{values[0] - columns[0][0]:g} s after the first, expected a "
                             f"recording of at most {MAX_DURATION:g} s (a day)")
         for col, value in zip(columns, values):

@@ -200,24 +200,28 @@ def make_person(spec: Any, base_dir: Path) -> PersonMotion:
 
 
 def turn_rate(spec: Any) -> tuple[float, str]:
-    """The fastest turn (rad/s) a person spec asks of the walker, and the keys that set it."""
+    """The fastest turn (rad/s) a person spec asks of the walker, and the keys and values that
+    set it."""
     if isinstance(spec, CircleSpec):
-        return spec.speed / spec.radius, "person.speed / person.radius"
-    if isinstance(spec, UShapeSpec):
-        return 0.6 / spec.radius, "person.radius"          # u_shape turns at 0.6 m/s
+        return spec.speed / spec.radius, (f"person.speed / person.radius: {spec.speed!r} m/s "
+                                          f"on a radius of {spec.radius!r} m")
+    if isinstance(spec, UShapeSpec):                      # u_shape turns at 0.6 m/s
+        return 0.6 / spec.radius, f"person.radius: 0.6 m/s on a radius of {spec.radius!r} m"
     if isinstance(spec, SegmentsSpec):
         rates = [max(s.v_start, s.v_end) * abs(s.curvature) for s in spec.segments]
         i = max(range(len(rates)), key=rates.__getitem__)
-        return rates[i], f"person.segments[{i}]: speed * curvature"
+        seg = spec.segments[i]
+        return rates[i], (f"person.segments[{i}]: speed {max(seg.v_start, seg.v_end)!r} m/s "
+                          f"at curvature {seg.curvature!r} 1/m")
     return 0.0, ""
 
 
 def check_turn_rate(spec: Any, limit: float, where: str) -> None:
     """A walk that turns faster than ``tracker.max_person_turn_rate``: no person does, and
     the tracker would clip it."""
-    rate, keys = turn_rate(spec)
+    rate, what = turn_rate(spec)
     if rate > limit:
-        raise ConfigError(f"{where}{keys}: a turn at {rate:.3g} rad/s, expected at most "
+        raise ConfigError(f"{where}{what} is a turn at {rate:.3g} rad/s, expected at most "
                           f"params.tracker.max_person_turn_rate ({limit:.3g} rad/s)")
 
 
