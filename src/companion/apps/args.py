@@ -142,7 +142,7 @@ def build_scenario(args: argparse.Namespace) -> Scenario:
     changes: dict = {}
     if args.controller:
         changes["controller"] = args.controller
-    if args.start:
+    if args.start is not None:
         changes["start"] = Pose(*ranged(floats_arg(args.start, 3, "--start"), args.start,
                                         "--start", "X"))
     if args.person_csv:
@@ -152,7 +152,7 @@ def build_scenario(args: argparse.Namespace) -> Scenario:
         if person.duration < sc.params.dt:
             raise UsageError(f"{args.person_csv}: expected a recording of at least one sample "
                              f"period (dt = {sc.params.dt:g} s), got {person.duration:g} s")
-    if args.duration:
+    if args.duration is not None:
         changes["duration"] = duration_arg(args.duration, dt=sc.params.dt)
     if args.obstacles:
         changes["obstacle_source"] = args.obstacles
