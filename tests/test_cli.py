@@ -96,7 +96,7 @@ def test_run_with_obstacles_writes_avoidance_metrics_and_panel(tmp_path, capsys)
     (["run", "nosuch"], "nosuch: no built-in scenario"),
     (["run", "figur8"], "did you mean 'figure8'"),
     (["run", "line", "--start", "1,2"], "--start: expected 3 comma-separated"),
-    (["run", "line", "--distance", "-1"], "--distance: expected a positive number"),
+    (["run", "line", "--distance", "-1"], "--distance: expected 0 < M <= 1e+06 m, got '-1'"),
     (["run", "line", "--duration", "abc"], "--duration: expected a number, got 'abc'"),
     (["run", "line", "--duration", "1e9"], "--duration: expected a finite number of magnitude"),
     (["run", "line", "--duration", "1e5"], "--duration: expected 0 < S <= 86400 s, got '1e5'"),

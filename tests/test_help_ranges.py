@@ -36,7 +36,7 @@ def test_every_numeric_flag_shows_its_range_in_help():
 def test_a_value_outside_the_help_range_is_rejected_with_that_range(capsys):
     from companion.apps.cli import main
     for argv, flag, metavar in [(["soak", "--seed", "-1"], "--seed", "N"),
-                                (["convergence", "--settle-limit", "nan"], "--settle-limit",
+                                (["convergence", "--settle-limit", "-5"], "--settle-limit",
                                  "S"),
                                 (["pedestrians", "--min-speed", "9"], "--min-speed", "MPS")]:
         assert main(argv + ["--out", "/nonexistent/never"]) == 2
