@@ -42,16 +42,30 @@ def param(default: Any, unit: str, doc: str, check: Check | None = None,
 #: Largest magnitude of any number in a configuration (m, s, rad, weights): beyond it a value
 #: is a typo or an attack, and arithmetic on it overflows. A field that accepts ``inf`` says so.
 MAX_MAGNITUDE = 1e6
+#: The longest simulated time (s): a day (a log of about 400 MB). Scenario durations, every
+#: ``--duration`` and the span of a recorded person are at most this.
+MAX_DURATION = 86400.0
 
 
+def ranged(text: str) -> Callable[[Check], Check]:
+    """Decorate a check with its range as docs/parameters.md shows it (``check.range``)."""
+    def mark(check: Check) -> Check:
+        check.range = text  # type: ignore[attr-defined]
+        return check
+    return mark
+
+
+@ranged("(0, 1e6]")
 def positive(x: float) -> str | None:
     return None if 0.0 < x < math.inf else "a finite positive number"
 
 
+@ranged("[0, 1e6]")
 def non_negative(x: float) -> str | None:
     return None if 0.0 <= x < math.inf else "a finite number >= 0"
 
 
+@ranged("(0, 1e6] or inf")
 def positive_or_inf(x: float) -> str | None:
     return None if x > 0.0 else "a positive number (inf allowed)"
 
@@ -59,22 +73,27 @@ def positive_or_inf(x: float) -> str | None:
 positive_or_inf.allows_inf = True  # type: ignore[attr-defined]
 
 
+@ranged("[0, 1]")
 def fraction(x: float) -> str | None:
     return None if 0.0 <= x <= 1.0 else "a fraction in [0, 1]"
 
 
+@ranged("integer >= 1")
 def at_least_one(n: int) -> str | None:
     return None if n >= 1 else "an integer >= 1"
 
 
+@ranged("each (0, 1e6]")
 def all_positive(xs: tuple[float, ...]) -> str | None:
     return None if all(0.0 < x < math.inf for x in xs) else "all entries finite and positive"
 
 
+@ranged("each [0, 1e6]")
 def all_non_negative(xs: tuple[float, ...]) -> str | None:
     return None if all(0.0 <= x < math.inf for x in xs) else "all entries finite and >= 0"
 
 
+@ranged("each (0, 1e6] or inf")
 def all_positive_or_inf(xs: tuple[float, ...]) -> str | None:
     return None if all(x > 0.0 for x in xs) else "all entries positive (inf allowed)"
 
@@ -86,14 +105,14 @@ def at_least(low: float, unit: str) -> Check:
     """A check: a finite number >= ``low`` (what a simulation can resolve)."""
     def check(x: float) -> str | None:
         return None if low <= x < math.inf else f"a number >= {low:g} {unit}"
-    return check
+    return ranged(f"[{low:g}, 1e6]")(check)
 
 
 def between(low: float, high: float, unit: str) -> Check:
     """A check: a number in [``low``, ``high``]."""
     def check(x: float) -> str | None:
         return None if low <= x <= high else f"a number in [{low:g}, {high:g}] {unit}"
-    return check
+    return ranged(f"[{low:g}, {high:g}]")(check)
 
 
 def hint(key: str, known: typing.Iterable[str]) -> str:
@@ -150,7 +169,8 @@ def convert(value: Any, tp: Any, name: str, allow_inf: bool = False) -> Any:
             return tuple(convert(v, args[0], f"{name}[{i}]", allow_inf)
                          for i, v in enumerate(value))
         if len(value) != len(args):
-            raise ConfigError(f"{name}: expected {len(args)} values, got {len(value)}")
+            raise ConfigError(f"{name}: expected {len(args)} values, got {len(value)}: "
+                              f"{list(value)!r}")
         return tuple(convert(v, a, f"{name}[{i}]", allow_inf)
                      for i, (v, a) in enumerate(zip(value, args)))
     if origin in (typing.Union, types.UnionType):
@@ -242,8 +262,19 @@ def load_toml(path: str | Path) -> dict[str, Any]:
         raise ConfigError(f"{path}: invalid TOML: {exc}") from None
 
 
-def field_docs(cls: type, prefix: str = "") -> list[tuple[str, str, str, str]]:
-    """Rows ``(key, unit, default, meaning)`` for every field of ``cls``, nested tables
+def range_text(f: dataclasses.Field) -> str:
+    """The allowed values of a field as docs/parameters.md gives them: its check's range,
+    its choices, or any number of magnitude at most 1e6."""
+    choices, check = f.metadata.get("choices"), f.metadata.get("check")
+    if choices:
+        return "one of " + ", ".join(f"'{c}'" for c in choices)
+    if check is not None:
+        return check.range
+    return "a name" if f.type in (str, "str") else "[-1e6, 1e6]"
+
+
+def field_docs(cls: type, prefix: str = "") -> list[tuple[str, str, str, str, str]]:
+    """Rows ``(key, unit, default, meaning, range)`` for every field of ``cls``, nested tables
     flattened."""
     rows = []
     for f in dataclasses.fields(cls):
@@ -252,5 +283,5 @@ def field_docs(cls: type, prefix: str = "") -> list[tuple[str, str, str, str]]:
             rows.extend(field_docs(type(default), prefix=f"{prefix}{f.name}."))
             continue
         rows.append((f"{prefix}{f.name}", f.metadata.get("unit", ""), repr(default),
-                     f.metadata.get("doc", "")))
+                     f.metadata.get("doc", ""), range_text(f)))
     return rows

@@ -11,13 +11,14 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
+from companion.apps.flags import FLAGS
 from companion.config import MAX_MAGNITUDE, load_toml
 from companion.control import make_controller
 from companion.errors import CompanionError, ConfigError
 from companion.geometry import wrap_2pi
 from companion.params import Params, load_sensing, params_from_mapping
 from companion.sim.recorded import load_person_csv
-from companion.sim.scenario import MAX_DURATION, Scenario, load_scenario
+from companion.sim.scenario import Scenario, load_scenario
 from companion.types import Pose
 
 
@@ -39,25 +40,42 @@ def floats_arg(text: str, n: int, what: str) -> tuple[float, ...]:
     return values
 
 
+def ranged(values: tuple[float, ...], text: str, flag: str, metavar: str) -> tuple[float, ...]:
+    """``values`` if each is in the range of ``flag`` (:data:`companion.apps.flags.FLAGS`)."""
+    bound = FLAGS[flag]
+    if not all(bound.contains(v) for v in values):
+        each = "each " if len(values) > 1 else ""
+        raise UsageError(f"{flag}: expected {each}{bound.text(metavar)}, got {text!r}")
+    return values
+
+
+def number_arg(text: str, flag: str, metavar: str) -> float:
+    """One number in the range of ``flag``."""
+    return ranged(floats_arg(text, 1, flag), text, flag, metavar)[0]
+
+
 def positive_arg(text: str, what: str) -> float:
-    (value,) = floats_arg(text, 1, what)
-    if value <= 0:
-        raise UsageError(f"{what}: expected a positive number, got {text!r}")
+    return number_arg(text, what, "M")
+
+
+def duration_arg(text: str, what: str = "--duration", dt: float | None = None) -> float:
+    """A simulated duration in (0, MAX_DURATION] s, at least one period ``dt``."""
+    value = number_arg(text, what, "S")
+    if dt is not None and value < dt:
+        raise UsageError(f"{what}: expected at least one sample period (dt = {dt:g} s), "
+                         f"got {text!r}")
     return value
 
 
-def duration_arg(text: str, what: str = "--duration") -> float:
-    """A simulated duration in (0, MAX_DURATION] s."""
-    value = positive_arg(text, what)
-    if value > MAX_DURATION:
-        raise UsageError(f"{what}: expected at most {MAX_DURATION:g} s (a day), got {text!r}")
+def int_arg(value: int | None, flag: str) -> int | None:
+    """A whole-number flag in its range (None: not given)."""
+    if value is not None:
+        ranged((value,), str(value), flag, "N")
     return value
 
 
 def seed_arg(seed: int) -> int:
-    if seed < 0:
-        raise UsageError(f"--seed: expected an integer >= 0, got {seed}")
-    return seed
+    return int_arg(seed, "--seed")
 
 
 def checked_controllers(names: Sequence[str], params: Params, where: str | None) -> None:
@@ -80,7 +98,12 @@ def params_arg(args: argparse.Namespace) -> Params:
 
 def with_sensing(params: Params, args: argparse.Namespace) -> Params:
     sensing = getattr(args, "sensing", None)
-    return params if sensing is None else params.replace(sensing=load_sensing(sensing))
+    if sensing is None:
+        return params
+    try:
+        return params.replace(sensing=load_sensing(sensing))
+    except ConfigError as exc:
+        raise UsageError(f"--sensing {sensing}: {exc}") from None
 
 
 def overrides(args: argparse.Namespace) -> dict:
@@ -95,7 +118,7 @@ def overrides(args: argparse.Namespace) -> dict:
     if args.side:
         formation["bearing"] = args.side
     if args.bearing is not None:
-        (bearing,) = floats_arg(args.bearing, 1, "--bearing")
+        bearing = number_arg(args.bearing, "--bearing", "RAD")
         formation["bearing"] = wrap_2pi(bearing)
     if args.distance is not None:
         formation["distance"] = positive_arg(args.distance, "--distance")
@@ -119,14 +142,18 @@ def build_scenario(args: argparse.Namespace) -> Scenario:
     changes: dict = {}
     if args.controller:
         changes["controller"] = args.controller
-    if args.start:
-        changes["start"] = Pose(*floats_arg(args.start, 3, "--start"))
+    if args.start is not None:
+        changes["start"] = Pose(*ranged(floats_arg(args.start, 3, "--start"), args.start,
+                                        "--start", "X"))
     if args.person_csv:
         person = load_person_csv(args.person_csv)
         changes["person"] = person
         changes["duration"] = person.duration
-    if args.duration:
-        changes["duration"] = duration_arg(args.duration)
+        if person.duration < sc.params.dt:
+            raise UsageError(f"{args.person_csv}: expected a recording of at least one sample "
+                             f"period (dt = {sc.params.dt:g} s), got {person.duration:g} s")
+    if args.duration is not None:
+        changes["duration"] = duration_arg(args.duration, dt=sc.params.dt)
     if args.obstacles:
         changes["obstacle_source"] = args.obstacles
     changes["params"] = with_sensing(sc.params, args)
@@ -148,6 +175,4 @@ def output_dir(path: Path) -> Path:
 
 
 def workers_arg(args: argparse.Namespace) -> int | None:
-    if args.workers is not None and args.workers < 1:
-        raise UsageError(f"--workers: expected a whole number >= 1, got {args.workers}")
-    return args.workers
+    return int_arg(args.workers, "--workers")

@@ -16,6 +16,7 @@ import sys
 import threading
 from collections.abc import Sequence
 
+from companion.apps.flags import help_range as rng
 from companion.errors import CompanionError
 
 # Choices spelled out so that --help and usage errors need no numpy, numba or scipy (they
@@ -40,7 +41,8 @@ def _sensing(p: argparse.ArgumentParser) -> None:
 
 def _workers(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, metavar="N",
-                   help="worker processes for the episodes (default: one per CPU)")
+                   help=f"worker processes for the episodes, {rng('--workers', 'N')} "
+                        "(default: one per CPU)")
 
 
 def parser() -> argparse.ArgumentParser:
@@ -55,14 +57,17 @@ def parser() -> argparse.ArgumentParser:
                      help="controller (default: the scenario's)")
     run.add_argument("--side", choices=SIDES, help="side of the person to walk on")
     run.add_argument("--bearing", metavar="RAD", help="desired bearing alpha_d in rad "
-                     "(left pi/2, behind pi, right 3pi/2)")
-    run.add_argument("--distance", metavar="M", help="desired distance rho_d in m (> 0, "
-                     "with the slot outside keepout.person_clearance)")
-    run.add_argument("--start", metavar="X,Y,THETA", help="robot start pose (m, m, rad); "
-                     "default: in the slot. Write --start=-1,2,0 when X is negative")
+                     f"(left pi/2, behind pi, right 3pi/2), {rng('--bearing', 'RAD')}")
+    run.add_argument("--distance", metavar="M", help="desired distance rho_d, "
+                     f"{rng('--distance', 'M')}, with the slot outside "
+                     "keepout.person_clearance")
+    run.add_argument("--start", metavar="X,Y,THETA", help="robot start pose (m, m, rad), "
+                     f"each {rng('--start', 'X')}; default: in the slot. Write "
+                     "--start=-1,2,0 when X is negative")
     run.add_argument("--person-csv", metavar="FILE", help="CSV with header t,x,y replacing "
                      "the scenario's person motion (duration: the recording's)")
-    run.add_argument("--duration", metavar="S", help="simulated time in s, at most 86400")
+    run.add_argument("--duration", metavar="S", help=f"simulated time, {rng('--duration', 'S')} "
+                     "and at least dt")
     run.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides "
                      "(docs/parameters.md)")
     run.add_argument("--obstacles", choices=("truth", "lidar"),
@@ -86,8 +91,10 @@ def parser() -> argparse.ArgumentParser:
 
     tn = sub.add_parser("tune", help="tune a controller's gains (docs/baselines.md)")
     tn.add_argument("controller", choices=TUNABLE)
-    tn.add_argument("--budget", type=int, default=64, help="candidates (default 64)")
-    tn.add_argument("--seed", type=int, default=0, help="random seed >= 0 (default 0)")
+    tn.add_argument("--budget", type=int, default=64, metavar="N",
+                    help=f"candidates, {rng('--budget', 'N')} (default 64)")
+    tn.add_argument("--seed", type=int, default=0, metavar="N",
+                    help=f"random seed, {rng('--seed', 'N')} (default 0)")
     tn.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
     _workers(tn)
     _sensing(tn)
@@ -99,11 +106,12 @@ def parser() -> argparse.ArgumentParser:
     cv = sub.add_parser("convergence", help="Fig. 3: 48 starts, settling and safety table")
     cv.add_argument("--controller", default="lqr", choices=CONTROLLERS)
     cv.add_argument("--speeds", default="0.5,1.0", metavar="V1,V2",
-                    help="person speeds in m/s (default 0.5,1.0)")
+                    help=f"person speeds, each {rng('--speeds', 'V')} (default 0.5,1.0)")
     cv.add_argument("--duration", default="30", metavar="S",
-                    help="simulated time per run in s, at most 86400 (default 30)")
-    cv.add_argument("--settle-limit", type=float, default=20.0, metavar="S",
-                    help="a run must settle within this time (default 20 s)")
+                    help=f"simulated time per run, {rng('--duration', 'S')} (default 30)")
+    cv.add_argument("--settle-limit", default="20", metavar="S",
+                    help=f"a run must settle within this time, {rng('--settle-limit', 'S')} "
+                         "(default 20)")
     cv.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
     cv.add_argument("--out", metavar="DIR", help="output folder (default out/convergence)")
     cv.add_argument("--plot", action="store_true", help="write the Fig. 3 panels as PNG")
@@ -119,10 +127,12 @@ def parser() -> argparse.ArgumentParser:
                     help="a controller, or all of them on the same runs (default lqr)")
     pd.add_argument("--side", default="both", choices=[*SIDES, "both"],
                     help="side of the person (default: both, one run each)")
-    pd.add_argument("--min-speed", type=float, default=0.6, metavar="MPS",
-                    help="only tracks with a higher mean speed (default 0.6 m/s)")
-    pd.add_argument("--min-duration", type=float, default=15.0, metavar="S",
-                    help="only tracks at least this long (default 15 s)")
+    pd.add_argument("--min-speed", default="0.6", metavar="MPS",
+                    help=f"only tracks with a higher mean speed, {rng('--min-speed', 'MPS')} "
+                         "(default 0.6)")
+    pd.add_argument("--min-duration", default="15", metavar="S",
+                    help=f"only tracks at least this long, {rng('--min-duration', 'S')} "
+                         "(default 15)")
     pd.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
     pd.add_argument("--out", metavar="DIR", help="output folder (default out/pedestrians)")
     _workers(pd)
@@ -132,9 +142,9 @@ def parser() -> argparse.ArgumentParser:
     sk = sub.add_parser("soak", help="long run of a random walker among obstacles "
                         "(docs/safety.md); exit 1 on a collision or a non-finite value")
     sk.add_argument("--duration", default="3600", metavar="S",
-                    help="simulated time in s, at most 86400 (default 3600)")
-    sk.add_argument("--seed", type=int, default=0,
-                    help="world and walk seed >= 0 (default 0)")
+                    help=f"simulated time, {rng('--duration', 'S')} (default 3600)")
+    sk.add_argument("--seed", type=int, default=0, metavar="N",
+                    help=f"world and walk seed, {rng('--seed', 'N')} (default 0)")
     sk.add_argument("--controller", default="lqr", choices=CONTROLLERS)
     sk.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
     sk.add_argument("--log", action="store_true", help="also write log.csv")
@@ -146,10 +156,11 @@ def parser() -> argparse.ArgumentParser:
                         "stack, full-stack throughput, first-step time and memory "
                         "(docs/performance.md)")
     bn.add_argument("--json", action="store_true", help="print the figures as JSON")
-    bn.add_argument("--episodes", type=int, default=48,
-                    help="figure-8 episodes in the throughput measurement (default 48)")
+    bn.add_argument("--episodes", type=int, default=48, metavar="N",
+                    help=f"figure-8 episodes in the throughput measurement, "
+                         f"{rng('--episodes', 'N')} (default 48)")
     bn.add_argument("--duration", default="60", metavar="S",
-                    help="simulated time per episode in s, at most 86400 (default 60)")
+                    help=f"simulated time per episode, {rng('--duration', 'S')} (default 60)")
     bn.add_argument("--no-first-step", action="store_true",
                     help="skip the fresh-process first-step measurement (numba compile)")
     bn.add_argument("--out", metavar="FILE", help="also write the JSON figures to FILE")

@@ -25,8 +25,11 @@ from companion.apps.args import (
     checked_controllers,
     duration_arg,
     floats_arg,
+    int_arg,
+    number_arg,
     output_dir,
     params_arg,
+    ranged,
     seed_arg,
     workers_arg,
 )
@@ -34,6 +37,7 @@ from companion.apps.logfile import LogCsv, Thinned
 from companion.control import CONTROLLERS, lookup
 from companion.data import pedestrians
 from companion.io import Outputs, save_figure, write_csv, write_json
+from companion.params import Params
 from companion.sim import convergence, soak
 from companion.sim.runner import run_many, stream_one
 from companion.sim.scenario import builtin_names, load_scenario
@@ -149,19 +153,20 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
 def cmd_convergence(args: argparse.Namespace) -> int:
     params = params_arg(args)
     checked_controllers([args.controller], params, args.params)
-    speeds = floats_arg(args.speeds, len(args.speeds.split(",")), "--speeds")
-    if any(v < 0 for v in speeds):
-        raise UsageError(f"--speeds: expected speeds >= 0 m/s, got {args.speeds!r}")
-    duration = duration_arg(args.duration)
+    speeds = ranged(floats_arg(args.speeds, len(args.speeds.split(",")), "--speeds"),
+                    args.speeds, "--speeds", "V")
+    duration = duration_arg(args.duration, dt=params.dt)
+    settle_limit = number_arg(args.settle_limit, "--settle-limit", "S")
+    workers = workers_arg(args)
     out = output_dir(Path(args.out or Path("out") / "convergence"))
     cases = list(convergence.cases(speeds))
     logs = run_many([convergence.episode(c, args.controller, params, duration) for c in cases],
-                    workers_arg(args))
+                    workers)
     rows, runs, lines, failures = [], {}, [], 0
     for case, log in zip(cases, logs):
         m = metrics.compute(log)
         settle = m["settling_time_s"]
-        ok = settle is not None and settle <= args.settle_limit \
+        ok = settle is not None and settle <= settle_limit \
             and m["min_person_distance_m"] >= 0.5
         failures += not ok
         rows.append((*convergence.csv_row(case, m), int(ok)))
@@ -183,7 +188,7 @@ def cmd_convergence(args: argparse.Namespace) -> int:
     print(f"{'speed':>5} {'start':>10} {'heading':>8} {'side':>5} {'settle_s':>9} "
           f"{'min_dist_m':>10}")
     print("\n".join(lines))
-    print(f"{len(rows) - failures}/{len(rows)} runs settled within {args.settle_limit:g} s "
+    print(f"{len(rows) - failures}/{len(rows)} runs settled within {settle_limit:g} s "
           f"and kept >= 0.5 m from the person")
     print(f"wrote {', '.join(written)} in {out}")
     return 0 if failures == 0 else 1
@@ -194,18 +199,19 @@ def cmd_pedestrians(args: argparse.Namespace) -> int:
     controllers = list(CONTROLLERS) if args.controller == "all" else [args.controller]
     checked_controllers(controllers, params, args.params)
     sides = ("left", "right") if args.side == "both" else (args.side,)
+    min_speed = number_arg(args.min_speed, "--min-speed", "MPS")
+    min_duration = number_arg(args.min_duration, "--min-duration", "S")
+    workers = workers_arg(args)
     tracks = pedestrians.select_tracks(pedestrians.load_scenes(args.data),
-                                       min_mean_speed=args.min_speed,
-                                       min_duration=args.min_duration)
+                                       min_mean_speed=min_speed, min_duration=min_duration)
     if not tracks:
         raise UsageError("no track is fast and long enough; lower --min-speed or --min-duration")
     out = output_dir(Path(args.out or Path("out") / "pedestrians"))
-    print(f"{len(tracks)} tracks (mean speed > {args.min_speed:g} m/s, >= "
-          f"{args.min_duration:g} s) x {len(sides)} side(s) x {len(controllers)} "
+    print(f"{len(tracks)} tracks (mean speed > {min_speed:g} m/s, >= "
+          f"{min_duration:g} s) x {len(sides)} side(s) x {len(controllers)} "
           f"controller(s), {args.sensing or 'ideal'} sensing")
     with progress_bar(len(tracks) * len(sides) * len(controllers), "episode") as progress:
-        rows = walkers.evaluate(tracks, params, controllers, sides, workers_arg(args),
-                                progress)
+        rows = walkers.evaluate(tracks, params, controllers, sides, workers, progress)
     with Outputs(out, "pedestrians") as stage:
         write_csv(stage / "pedestrians.csv", walkers.COLUMNS,
                   ([r[k] for k in walkers.COLUMNS] for r in rows))
@@ -233,11 +239,12 @@ def walkers_text(table: dict, paired: dict) -> str:
 def cmd_soak(args: argparse.Namespace) -> int:
     params = params_arg(args)
     checked_controllers([args.controller], params, args.params)
-    duration = duration_arg(args.duration)
+    duration = duration_arg(args.duration, dt=params.dt)
+    seed = seed_arg(args.seed)
     out = output_dir(Path(args.out or Path("out") / "soak"))
-    print(f"soak: {duration:g} s of a random walker among pillars (seed {args.seed}), "
+    print(f"soak: {duration:g} s of a random walker among pillars (seed {seed}), "
           f"controller {args.controller}; about {duration / 25:.0f} s")
-    spec = soak.soak_episode(duration, seed_arg(args.seed), args.controller, params)
+    spec = soak.soak_episode(duration, seed, args.controller, params)
     blocks = started(stream_one(spec))
     summary = soak.Summary(params)
     with Outputs(out, "soak") as stage:
@@ -260,13 +267,14 @@ def cmd_soak(args: argparse.Namespace) -> int:
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
+    workers = workers_arg(args)
     out = output_dir(Path(args.out or Path("out") / "reproduce"))
     names = reproduce.controllers()
     print(f"Reproducing Fig. 3, Table 2, Fig. 4, Fig. 7 and Table 3 with {', '.join(names)} "
           f"into {out}")
     with progress_bar(reproduce.episode_count(), "episode") as progress, \
             Outputs(out, "reproduce") as stage:
-        result = reproduce.reproduce(stage, workers_arg(args), progress)
+        result = reproduce.reproduce(stage, workers, progress)
     print(reproduce.fig3_summary(result.fig3))
     print("Table 2 (ours; paper's LQR/PID/VSM/IC rho and alpha at the right):")
     print(reproduce.table2_text(result.table2))
@@ -283,14 +291,13 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 def cmd_tune(args: argparse.Namespace) -> int:
     params = params_arg(args)
     checked_controllers([args.controller], params, args.params)
-    if args.budget < 1:
-        raise UsageError(f"--budget: expected a whole number >= 1, got {args.budget}")
-    print(f"tuning {args.controller}: {args.budget} candidates, seed {args.seed}, "
+    budget, seed = int_arg(args.budget, "--budget"), seed_arg(args.seed)
+    workers = workers_arg(args)
+    print(f"tuning {args.controller}: {budget} candidates, seed {seed}, "
           f"scenarios {', '.join(c.name for c in tune.tuning_scenarios())}")
     cases = len(tune.tuning_scenarios())
-    with progress_bar(args.budget * cases, "episode") as progress:
-        result = tune.tune(args.controller, params, args.budget, seed_arg(args.seed),
-                           workers_arg(args), progress)
+    with progress_bar(budget * cases, "episode") as progress:
+        result = tune.tune(args.controller, params, budget, seed, workers, progress)
     print(f"J: current gains {result.start_score:.4f}, best {result.best_score:.4f}")
     for dim, value in zip(result.dims, result.best):
         print(f"  {dim.name} = {value:.4g}")
@@ -298,10 +305,10 @@ def cmd_tune(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    if args.episodes < 1:
-        raise UsageError(f"--episodes: expected a whole number >= 1, got {args.episodes}")
-    duration = duration_arg(args.duration)
-    result = benchmark.run(args.episodes, duration, workers_arg(args), not args.no_first_step,
+    episodes = int_arg(args.episodes, "--episodes")
+    duration = duration_arg(args.duration, dt=Params().dt)
+    workers = workers_arg(args)
+    result = benchmark.run(episodes, duration, workers, not args.no_first_step,
                            progress=lambda msg: print(f"bench: {msg}", file=sys.stderr))
     if args.out:
         write_json(args.out, result)

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from companion.geometry import clearance
-from companion.params import Params
+from companion.params import Params, RobotParams
 from companion.types import Circle, Obstacle, Pose, Scan
 
 
@@ -96,3 +96,46 @@ class Clock:
             return self.dt, "clock"
         self.now += step
         return step, "clock_gap" if step > self.max_step else "ok"
+
+
+#: A pose change between two odometry samples beyond this multiple of what the velocity limits
+#: allow in the time between them (plus the floors below, for noise) is a jump no robot makes.
+JUMP_MARGIN = 2.0
+JUMP_FLOOR_M = 0.05
+JUMP_FLOOR_RAD = 0.05
+
+
+class Odometry:
+    """The odometry samples of a stream (stamp, pose): ``check`` returns ``""`` for a
+    plausible sample, ``"odometry_time"`` for a stamp that is not finite or earlier than the
+    last one, ``"odometry_jump"`` for a pose change no robot can make in the time between.
+    A jump becomes the reference for the next sample (a relocalised pose is followed again
+    after one sample); a sample whose time went back does not. Non-finite poses are left to
+    the robot pose check."""
+
+    def __init__(self, robot: RobotParams):
+        self.robot = robot
+        self.reset()
+
+    def reset(self) -> None:
+        self._last: tuple[float, Pose] | None = None
+
+    def check(self, stamp: float, pose: Pose) -> str:
+        if not math.isfinite(stamp):
+            return "odometry_time"
+        if not pose_is_finite(pose):
+            return ""
+        if self._last is None:
+            self._last = (stamp, pose)
+            return ""
+        t0, p0 = self._last
+        if stamp < t0:
+            return "odometry_time"
+        self._last = (stamp, pose)
+        elapsed = stamp - t0
+        moved = math.hypot(pose.x - p0.x, pose.y - p0.y)
+        turned = abs(math.remainder(pose.theta - p0.theta, 2.0 * math.pi))
+        if moved > JUMP_MARGIN * self.robot.v_max * elapsed + JUMP_FLOOR_M \
+                or turned > JUMP_MARGIN * self.robot.omega_max * elapsed + JUMP_FLOOR_RAD:
+            return "odometry_jump"
+        return ""

@@ -48,6 +48,7 @@ class SafetySupervisor:
         self.inner = inner
         self.params = params
         self._clock = checks.Clock(params.dt, params.supervisor.max_step_ratio)
+        self._odometry = checks.Odometry(params.robot)
         self._tracker = PersonTracker(params.tracker)
         self.reset()
 
@@ -58,6 +59,7 @@ class SafetySupervisor:
         self._started = False         # _prev is known (a step, or applied())
         self._odometry_bad_since: float | None = None       # odometry invalid since
         self._clock.reset()
+        self._odometry.reset()
         self._tracker.reset()
         self._sensor_t = 0.0          # the sensor clock: the last valid time, periods counted on
         self._poses: deque[tuple[float, Pose]] = deque()   # for robot-frame detections
@@ -94,7 +96,8 @@ class SafetySupervisor:
         scan = None if obs.scan is None else checked_scan(obs.scan, p.lidar.range_max)
         if not stop and obs.scan is not None:
             stop = "scan_invalid" if scan is None else checks.scan_fault(scan, p, reasons)
-        velocity = self._velocity(obs, reasons)
+        odometry = self._odometry.check(obs.t, obs.robot)   # a fault: missing odometry
+        velocity = self._velocity(obs, reasons, odometry)
         if not stop and self._odometry_bad_since is not None \
                 and self._sensor_t - self._odometry_bad_since > p.supervisor.odometry_timeout_s:
             stop = "odometry_lost"
@@ -103,7 +106,9 @@ class SafetySupervisor:
 
         stepped = False
         target = (*self._prev, 0.0)
-        if not stop and fresh:
+        if odometry:
+            self._inner_fresh = True  # the controller's filters knew the pose before it
+        if not stop and fresh and not odometry:
             if self._inner_fresh:
                 self.inner.reset()
                 self._inner_fresh = False
@@ -159,16 +164,21 @@ class SafetySupervisor:
             at = pose
         return at
 
-    def _velocity(self, obs: Observation, reasons: list[str]) -> tuple[float, float]:
-        """The robot's velocity: odometry if it is given and plausible (finite, at most twice
-        the velocity limits), else the last command; invalid odometry is reported."""
+    def _velocity(self, obs: Observation, reasons: list[str], fault: str
+                  ) -> tuple[float, float]:
+        """The robot's velocity: odometry if the sample is plausible (``fault`` empty: its
+        time advances and its pose does not jump) and its velocity is finite and at most
+        twice the velocity limits, else the last command; an invalid sample is reported and
+        counts as missing (the timeout stops the robot)."""
         v, r = obs.robot_velocity, self.params.robot
-        if v is None:
+        if not fault and v is None:
+            self._odometry_bad_since = None
             return self._prev
-        if checks.finite(*v) and abs(v[0]) <= 2.0 * r.v_max and abs(v[1]) <= 2.0 * r.omega_max:
+        if not fault and checks.finite(*v) and abs(v[0]) <= 2.0 * r.v_max \
+                and abs(v[1]) <= 2.0 * r.omega_max:
             self._odometry_bad_since = None
             return v
-        reasons.append("odometry_invalid")
+        reasons.append(fault or "odometry_invalid")
         if self._odometry_bad_since is None:
             self._odometry_bad_since = self._sensor_t
         return self._prev

@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from companion.config import Validated, build, load_toml, param, validate
+from companion.config import Validated, build, load_toml, param, ranged, validate
 from companion.errors import ConfigError
 from companion.params.control import (
     BEHIND,
@@ -48,6 +48,7 @@ __all__ = ["BEHIND", "FRONT", "IDEAL", "LEFT", "PROFILES", "REALISTIC", "RIGHT",
            "load_sensing", "params_from_mapping", "sensing_params", "side_to_bearing"]
 
 
+@ranged("[0.001, 1]")
 def _sample_period(x: float) -> str | None:
     return None if 1e-3 <= x <= 1.0 else "a sample period in [0.001, 1] s"
 
@@ -86,6 +87,18 @@ class Params(Validated):
                     f"{f.bearing:.3f} rad puts the robot centre {centre:.2f} m from the person, "
                     f"inside {name} ({keep:g} m); expected a larger distance or a smaller "
                     f"{name.split('.')[1]}")
+
+        s, tr = self.sensing, self.tracker
+        if s.person_latency_s >= tr.max_delay_s:
+            raise ConfigError(
+                f"sensing.person_latency_s: expected less than tracker.max_delay_s "
+                f"({tr.max_delay_s:g} s; every detection would arrive stale), got "
+                f"{s.person_latency_s!r}")
+        if 1.0 / s.person_rate_hz > tr.lost_after_s:
+            raise ConfigError(
+                f"sensing.person_rate_hz: expected at least 1 / tracker.lost_after_s "
+                f"({1.0 / tr.lost_after_s:g} Hz; the person would be lost between "
+                f"detections), got {s.person_rate_hz!r}")
 
     def replace(self, **changes: Any) -> Params:
         """A copy with top-level fields replaced, validated."""

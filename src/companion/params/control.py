@@ -15,6 +15,7 @@ from companion.config import (
     param,
     positive,
     positive_or_inf,
+    ranged,
 )
 from companion.geometry import TWO_PI
 
@@ -26,10 +27,12 @@ FRONT = 0.0
 SIDES = {"left": LEFT, "right": RIGHT, "behind": BEHIND, "front": FRONT}
 
 
+@ranged("[0, 2*pi)")
 def _bearing(x: float) -> str | None:
     return None if 0.0 <= x < TWO_PI else "an angle in [0, 2*pi) rad"
 
 
+@ranged("(1, 1e6]")
 def _step_ratio(x: float) -> str | None:
     return None if 1.0 < x < math.inf else "a finite ratio > 1"
 

@@ -13,27 +13,33 @@ from companion.config import (
     param,
     positive,
     positive_or_inf,
+    ranged,
 )
 from companion.errors import ConfigError
 from companion.geometry import TWO_PI
 
 
+@ranged("(0, 2*pi]")
 def _fov(x: float) -> str | None:
     return None if 0.0 < x <= TWO_PI + 1e-9 else "an angle in (0, 2*pi] rad"
 
 
+@ranged("[0.0001, pi]")
 def _resolution(x: float) -> str | None:
     return None if 1e-4 <= x <= math.pi else "an angle in [0.0001, pi] rad"
 
 
+@ranged("[0, pi/2)")
 def _breakpoint_angle(x: float) -> str | None:
     return None if 0.0 <= x < 0.5 * math.pi else "an angle in [0, pi/2) rad"
 
 
+@ranged("[0, 1)")
 def _dropout(x: float) -> str | None:
     return None if 0.0 <= x < 1.0 else "a probability in [0, 1)"
 
 
+@ranged("(0, 1)")
 def _probability(x: float) -> str | None:
     return None if 0.0 < x < 1.0 else "a probability in (0, 1)"
 
@@ -143,8 +149,15 @@ class TrackerParams(Validated):
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        for name in ("world_frame", "robot_frame"):
+            if not getattr(self, name).strip():
+                raise ConfigError(f"{name}: expected a frame name, got "
+                                  f"{getattr(self, name)!r}")
+        if self.robot_frame == self.world_frame:
+            raise ConfigError(f"robot_frame: expected a frame other than "
+                              f"world_frame, got {self.robot_frame!r}")
         if self.lost_after_s < self.coast_after_s:
-            raise ConfigError(f"tracker.lost_after_s: expected at least coast_after_s "
+            raise ConfigError(f"lost_after_s: expected at least coast_after_s "
                               f"({self.coast_after_s:g} s), got {self.lost_after_s:g}")
 
 
@@ -203,5 +216,5 @@ class ExtractorParams(Validated):
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.min_radius > self.max_radius:
-            raise ConfigError(f"extractor.min_radius: expected at most max_radius "
+            raise ConfigError(f"min_radius: expected at most max_radius "
                               f"({self.max_radius:g} m), got {self.min_radius:g}")

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import make_smoothing_spline
 
+from companion.config import MAX_DURATION
 from companion.errors import DataError
 from companion.geometry import wrap_pi
 from companion.io import MAX_CELL, parse_number
@@ -332,6 +333,10 @@ def _parse_rows(name: str, reader) -> tuple[list[float], list[float], list[float
             kind = "duplicate" if values[0] == columns[0][-1] else "unsorted"
             raise DataError(f"{name}:{line}: column 't': {kind} timestamp {values[0]:g}, "
                             f"expected a time after {columns[0][-1]:g} (line {last_line})")
+        if columns[0] and values[0] - columns[0][0] > MAX_DURATION:
+            raise DataError(f"{name}:{line}: column 't': timestamp {values[0]!r} is "
+                            f"{values[0] - columns[0][0]:g} s after the first, expected a "
+                            f"recording of at most {MAX_DURATION:g} s (a day)")
         for col, value in zip(columns, values):
             col.append(value)
         last_line = line

@@ -52,6 +52,7 @@ from pathlib import Path
 from typing import Any
 
 from companion.config import (
+    MAX_DURATION,
     at_least,
     between,
     build,
@@ -78,8 +79,11 @@ Triple = tuple[float, float, float]
 #: What a walking (or jogging) person can do: speeds in m/s.
 SPEED = between(0.0, 3.0, "m/s")
 WALKING = between(0.01, 3.0, "m/s")
-#: The longest simulated episode (s): a day (its log is about 400 MB).
-MAX_DURATION = 86400.0
+#: The largest seed: what a TOML integer holds.
+MAX_SEED = 2**63 - 1
+#: The shortest figure-8 lap (s): Eq. (23) moves 10 m per radian of phase at its fastest, so a
+#: faster lap would make the person run beyond SPEED's 3 m/s.
+FIGURE8_MIN_LAP = 2.0 * math.pi * 10.0 / 3.0
 
 
 @dataclass(frozen=True)
@@ -98,7 +102,8 @@ class CircleSpec:
 
 @dataclass(frozen=True)
 class Figure8Spec:
-    lap_time: float = param(60.0, "s", "time for one lap of Eq. (23)", at_least(5.0, "s"))
+    lap_time: float = param(60.0, "s", "time for one lap of Eq. (23)",
+                            at_least(FIGURE8_MIN_LAP, "s"))
     phase: float = param(0.0, "rad", "phase of Eq. (23) at t = 0 (0: at (5, 3) walking +x)")
 
 
@@ -194,7 +199,34 @@ def make_person(spec: Any, base_dir: Path) -> PersonMotion:
     raise TypeError(f"make_person: unknown spec {spec!r}")
 
 
-def person_from_mapping(mapping: Any, where: str, base_dir: Path) -> PersonMotion:
+def turn_rate(spec: Any) -> tuple[float, str]:
+    """The fastest turn (rad/s) a person spec asks of the walker, and the keys and values that
+    set it."""
+    if isinstance(spec, CircleSpec):
+        return spec.speed / spec.radius, (f"person.speed / person.radius: {spec.speed!r} m/s "
+                                          f"on a radius of {spec.radius!r} m")
+    if isinstance(spec, UShapeSpec):                      # u_shape turns at 0.6 m/s
+        return 0.6 / spec.radius, f"person.radius: 0.6 m/s on a radius of {spec.radius!r} m"
+    if isinstance(spec, SegmentsSpec):
+        rates = [max(s.v_start, s.v_end) * abs(s.curvature) for s in spec.segments]
+        i = max(range(len(rates)), key=rates.__getitem__)
+        seg = spec.segments[i]
+        return rates[i], (f"person.segments[{i}]: speed {max(seg.v_start, seg.v_end)!r} m/s "
+                          f"at curvature {seg.curvature!r} 1/m")
+    return 0.0, ""
+
+
+def check_turn_rate(spec: Any, limit: float, where: str) -> None:
+    """A walk that turns faster than ``tracker.max_person_turn_rate``: no person does, and
+    the tracker would clip it."""
+    rate, what = turn_rate(spec)
+    if rate > limit:
+        raise ConfigError(f"{where}{what} is a turn at {rate:.3g} rad/s, expected at most "
+                          f"params.tracker.max_person_turn_rate ({limit:.3g} rad/s)")
+
+
+def person_spec(mapping: Any, where: str) -> Any:
+    """The validated spec of a ``[person]`` table."""
     if not isinstance(mapping, Mapping):
         raise ConfigError(f"{where}person: expected a table")
     kind = mapping.get("kind")
@@ -207,7 +239,7 @@ def person_from_mapping(mapping: Any, where: str, base_dir: Path) -> PersonMotio
         raise ConfigError(f"{where}person.segments: expected at least one [[person.segments]]")
     if isinstance(spec, CsvSpec) and not spec.path:
         raise ConfigError(f"{where}person.path: expected the path of a CSV file")
-    return make_person(spec, base_dir)
+    return spec
 
 
 @dataclass(frozen=True)
@@ -274,28 +306,29 @@ def scenario_from_mapping(data: Mapping[str, Any], source: str, base_dir: Path,
     reject_unknown(data, TOP_KEYS, where)
     name = data.get("name", Path(source).stem)
     if not isinstance(name, str):
-        raise ConfigError(f"{where}name: expected a string")
+        raise ConfigError(f"{where}name: expected a string, got {name!r}")
     description = data.get("description", "")
     if not isinstance(description, str):
-        raise ConfigError(f"{where}description: expected a string")
+        raise ConfigError(f"{where}description: expected a string, got {description!r}")
     duration = data.get("duration", 60.0)
     if isinstance(duration, bool) or not isinstance(duration, (int, float)) \
             or not 0.0 < duration <= MAX_DURATION:
         raise ConfigError(f"{where}duration: expected a number of seconds in (0, "
                           f"{MAX_DURATION:g}], got {duration!r}")
     seed = data.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ConfigError(f"{where}seed: expected an integer >= 0, got {seed!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
+        raise ConfigError(f"{where}seed: expected an integer in [0, 2**63 - 1], got {seed!r}")
     controller = data.get("controller", "lqr")
     if not isinstance(controller, str):
-        raise ConfigError(f"{where}controller: expected a controller name")
+        raise ConfigError(f"{where}controller: expected a controller name, got {controller!r}")
     try:
         lookup(controller)
     except ConfigError as exc:
         raise ConfigError(f"{where}{exc}") from None
     if "person" not in data:
         raise ConfigError(f"{where}person: missing table [person]")
-    person = person_from_mapping(data["person"], where, base_dir)
+    spec = person_spec(data["person"], where)
+    person = make_person(spec, base_dir)
     robot = data.get("robot", {})
     if not isinstance(robot, Mapping):
         raise ConfigError(f"{where}robot: expected a table")
@@ -311,7 +344,15 @@ def scenario_from_mapping(data: Mapping[str, Any], source: str, base_dir: Path,
     params_map = _resolve_auto_side(dict(params_map), start, person, where)
     params = params_from_mapping(params_map, prefix=f"{where}params.")
     if "sensing" in data:
-        params = params.replace(sensing=sensing_params(data["sensing"], f"{where}sensing"))
+        sensing = sensing_params(data["sensing"], f"{where}sensing")
+        try:
+            params = params.replace(sensing=sensing)
+        except ConfigError as exc:        # a check across sections
+            raise ConfigError(f"{where}{exc}") from None
+    check_turn_rate(spec, params.tracker.max_person_turn_rate, where)
+    if duration < params.dt:
+        raise ConfigError(f"{where}duration: expected at least one sample period "
+                          f"(params.dt = {params.dt:g} s), got {duration!r}")
     obstacles = obstacles_from_list(data.get("obstacles", []), where)
     obstacle_source = check_source(data.get("obstacle_source", "truth"), where)
     faults = faults_from_list(data.get("faults", []), f"{where}faults")
