@@ -43,7 +43,7 @@ def _work(*args, **kwargs):
 
 @pytest.fixture
 def no_work(monkeypatch):
-    for owner, name in [(commands, "run_scenario"), (commands, "run_many"), (soak, "run_soak"),
+    for owner, name in [(commands, "stream_one"), (commands, "run_many"), (soak, "run_soak"),
                         (tune, "tune"), (benchmark, "run"), (walkers, "evaluate"),
                         (reproduce, "reproduce"), (pedestrians, "load_scenes")]:
         monkeypatch.setattr(owner, name, _work)

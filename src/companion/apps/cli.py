@@ -176,7 +176,7 @@ def _transport(p: argparse.ArgumentParser) -> None:
     p.add_argument("--zenoh-connect", metavar="ENDPOINT",
                    help="Zenoh router to connect to (default tcp/127.0.0.1:7447)")
     p.add_argument("--domain-id", type=int, metavar="N",
-                   help="ROS_DOMAIN_ID in [0, 232] (default: the parameters', 0)")
+                   help=f"ROS_DOMAIN_ID, {rng('--domain-id', 'N')} (default: the parameters', 0)")
 
 
 def _ros_commands(sub) -> None:
@@ -186,8 +186,8 @@ def _ros_commands(sub) -> None:
                     "(companion: ros__parameters: ...)")
     nd.add_argument("--controller", choices=CONTROLLERS,
                     help="controller (default: the parameters', lqr)")
-    nd.add_argument("--duration", metavar="S", help="stop after S s of the node's time, at "
-                    "most 86400 (default: run until SIGINT or SIGTERM)")
+    nd.add_argument("--duration", metavar="S", help="stop after S s of the node's time, "
+                    f"{rng('--duration', 'S')} (default: run until SIGINT or SIGTERM)")
     nd.add_argument("--bag", metavar="DIR", help="record what the node receives and sends, "
                     "and a Foxglove scene, as a ROS 2 bag (MCAP) (docs/recording.md)")
     _transport(nd)
@@ -200,12 +200,13 @@ def _ros_commands(sub) -> None:
                     "section: topics, frames, transport)")
     sr.add_argument("--person-type", choices=("point", "pose", "pose_array", "odometry"),
                     help="message type of the person detections (default: point)")
-    sr.add_argument("--rate", metavar="X", help="real-time factor in (0, 100]; other than 1 "
-                    "publishes /clock (use_sim_time) (default 1)")
-    sr.add_argument("--wait", default="10", metavar="S", help="wait up to S s (at most 3600) "
-                    "for the node's first command before starting (default 10)")
-    sr.add_argument("--duration", metavar="S", help="simulated time in s, at most 86400")
-    sr.add_argument("--seed", type=int, metavar="N", help="sensing noise seed >= 0")
+    sr.add_argument("--rate", metavar="X", help=f"real-time factor, {rng('--rate', 'X')}; "
+                    "other than 1 publishes /clock (use_sim_time) (default 1)")
+    sr.add_argument("--wait", default="10", metavar="S", help="wait up to S s for the node's "
+                    f"first command before starting, {rng('--wait', 'S')} (default 10)")
+    sr.add_argument("--duration", metavar="S", help=f"simulated time, {rng('--duration', 'S')}")
+    sr.add_argument("--seed", type=int, metavar="N",
+                    help=f"sensing noise seed, {rng('--seed', 'N')}")
     sr.add_argument("--out", metavar="DIR", help="output folder (default "
                     "out/sim-robot-SCENARIO)")
     sr.add_argument("--bag", metavar="DIR", help="record what the robot sends and receives, "

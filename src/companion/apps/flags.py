@@ -52,6 +52,9 @@ FLAGS: dict[str, Bound] = {
     "--budget": COUNT,
     "--episodes": COUNT,
     "--seed": SEED,
+    "--wait": Bound(0.0, 3600.0, True, "s"),
+    "--rate": Bound(0.0, 100.0, True),
+    "--domain-id": Bound(0, 232),
 }
 
 

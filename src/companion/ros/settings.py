@@ -20,6 +20,7 @@ from companion.config import (
     between,
     build,
     param,
+    ranged,
     reject_unknown,
 )
 from companion.control import lookup, make_controller
@@ -29,24 +30,44 @@ from companion.ros.convert import PERSON_TYPES
 from companion.ros.messages import DISTROS
 
 
+@ranged("a ROS node name")
 def _node_name(name: str) -> str | None:
     ok = re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name) is not None
     return None if ok else "a ROS node name: letters, digits and _, not starting with a digit"
 
 
+@ranged("an absolute ROS namespace")
 def _namespace(name: str) -> str | None:
     ok = re.fullmatch(r"/([A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*)?", name) is not None
     return None if ok else "an absolute ROS namespace such as '/' or '/robot1'"
 
 
+@ranged("a Zenoh endpoint")
 def endpoint_problem(text: str) -> str | None:
     ok = re.fullmatch(r"(tcp|udp|tls|quic|ws|unixsock-stream)/\S+", text) is not None
     return None if ok else "a Zenoh endpoint such as 'tcp/127.0.0.1:7447'"
 
 
+@ranged("an absolute ROS topic name or ''")
 def _topic(name: str) -> str | None:
     ok = name == "" or (name.startswith("/") and " " not in name and not name.endswith("/"))
     return None if ok else "an absolute ROS topic name such as '/odom' (or '' for none)"
+
+
+@ranged("[0, 232]")
+def _domain(n: int) -> str | None:
+    return None if 0 <= n <= 232 else "an integer in [0, 232]"
+
+
+@ranged("[1, 1000]")
+def _depth(n: int) -> str | None:
+    return None if 1 <= n <= 1000 else "an integer in [1, 1000]"
+
+
+@ranged("|x|, |y| <= 10 m, |yaw| <= 7 rad")
+def _mount(m: tuple[float, float, float]) -> str | None:
+    ok = abs(m[0]) <= 10 and abs(m[1]) <= 10 and abs(m[2]) <= 7
+    return None if ok else "|x|, |y| <= 10 m and |yaw| <= 7 rad"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -73,8 +94,7 @@ class RosParams(Validated):
     transport: str = param("dds", "", "wire protocol", choices=("dds", "zenoh"))
     distro: str = param("jazzy", "", "ROS 2 distribution of the message types and type "
                         "hashes", choices=tuple(DISTROS))
-    domain_id: int = param(0, "", "ROS_DOMAIN_ID, in [0, 232]",
-                           lambda n: None if 0 <= n <= 232 else "an integer in [0, 232]")
+    domain_id: int = param(0, "", "ROS_DOMAIN_ID", _domain)
     zenoh_connect: str = param("tcp/127.0.0.1:7447", "", "Zenoh endpoint to connect to (the "
                                "zenohd router of rmw_zenoh)", endpoint_problem)
     use_sim_time: bool = param(False, "", "take time from /clock instead of the system clock")
@@ -86,19 +106,16 @@ class RosParams(Validated):
     base_frame: str = param("base_link", "", "the robot's frame")
     lidar_frame: str = param("laser", "", "the LiDAR's frame")
     lidar_mount: tuple[float, float, float] = param(
-        (0.0, 0.0, 0.0), "m, m, rad", "LiDAR pose (x, y, yaw) in the robot's frame",
-        lambda m: None if abs(m[0]) <= 10 and abs(m[1]) <= 10 and abs(m[2]) <= 7
-        else "|x|, |y| <= 10 m and |yaw| <= 7 rad")
-    odom_timeout_s: float = param(0.5, "s", "odometry older than this stops the robot, in "
-                                  "(0, 10]", between(1e-3, 10.0, "s"))
-    scan_timeout_s: float = param(0.5, "s", "no scan for longer than this stops the robot, in "
-                                  "(0, 10]", between(1e-3, 10.0, "s"))
+        (0.0, 0.0, 0.0), "m, m, rad", "LiDAR pose (x, y, yaw) in the robot's frame", _mount)
+    odom_timeout_s: float = param(0.5, "s", "odometry older than this stops the robot",
+                                  between(1e-3, 10.0, "s"))
+    scan_timeout_s: float = param(0.5, "s", "no scan for longer than this stops the robot",
+                                  between(1e-3, 10.0, "s"))
     scan_reliable: bool = param(False, "", "subscribe to the scan reliably (default: best "
                                 "effort, as drivers publish it)")
-    history_depth: int = param(10, "", "QoS history depth of reliable topics, in [1, 1000]",
-                               lambda n: None if 1 <= n <= 1000 else "an integer in [1, 1000]")
+    history_depth: int = param(10, "", "QoS history depth of reliable topics", _depth)
     odometry_buffer_s: float = param(2.0, "s", "how much odometry is kept to place late "
-                                     "detections and scans, in [0.1, 60]",
+                                     "detections and scans",
                                      between(0.1, 60.0, "s"))
     topics: Topics = param(Topics(), "", "")
 

@@ -310,7 +310,8 @@ def _parse_fast(f) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     except (ValueError, UserWarning):
         return None
     if data.shape[1] != len(CSV_COLUMNS) or len(data) < MIN_SAMPLES \
-            or not np.all(np.abs(data) <= MAX_CELL) or not np.all(np.diff(data[:, 0]) > 0.0):
+            or not np.all(np.abs(data) <= MAX_CELL) or not np.all(np.diff(data[:, 0]) > 0.0) \
+            or data[-1, 0] - data[0, 0] > MAX_DURATION:
         return None
     return data[:, 0].copy(), data[:, 1].copy(), data[:, 2].copy()
 
