@@ -44,7 +44,7 @@ def selection(args) -> tuple[tuple[str, ...], tuple[str, ...]]:
             names_arg(args.sensing, tuple(PROFILES), "--sensing"))
 
 
-plan = fuzz.plan
+plan, failed = fuzz.plan, fuzz.failed
 
 
 def run(episodes: Sequence[tuple[int, str, str]], workers: int | None,
