@@ -245,7 +245,7 @@ def cmd_fuzz(args: argparse.Namespace) -> int:
         if len(controllers) != 1 or len(sensings) != 1:
             raise UsageError("--replay: give the episode's controller and sensing as one "
                              "--controllers NAME and one --sensing NAME (fuzz.csv has them)")
-        seed = fuzz.bounded_arg(args.replay, 0, fuzz.MAX_SEED * 10_000_000, "--replay")
+        seed = fuzz.bounded_arg(args.replay, 0, fuzz.MAX_EPISODE_SEED, "--replay")
         case, counts, log = fuzz.replay(seed, controllers[0], sensings[0])
         with Outputs(out, "fuzz-replay") as stage:
             write_log(stage / "log.csv", log)

@@ -17,6 +17,7 @@ from companion.types import Log
 #: Bounds of --steps and --seed (the episode seeds stay below 2**63).
 MAX_STEPS = 1_000_000_000
 MAX_SEED = 100_000_000
+MAX_EPISODE_SEED = (MAX_SEED + 1) * fuzz.SEED_STRIDE - 1
 COLUMNS = (*(f.name for f in dataclasses.fields(fuzz.Case)), *fuzz.COUNTS, "failed")
 
 

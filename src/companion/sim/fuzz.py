@@ -106,7 +106,7 @@ def draw(seed: int, controller: str, sensing: str, base: Params | None = None
     world and the walk depend on the seed alone, so a seed can be replayed with any pair."""
     base = base or Params()
     rng = np.random.default_rng(seed)
-    duration = round(float(rng.uniform(*DURATION)) / base.dt) * base.dt
+    duration = _steps(rng, base.dt) * base.dt
     drawn = float(rng.uniform(*DISTANCE))
     bearing = float(rng.uniform(0.0, 2.0 * math.pi))
     distance = feasible_distance(drawn, bearing, base)
@@ -130,6 +130,11 @@ def draw(seed: int, controller: str, sensing: str, base: Params | None = None
     return case, spec
 
 
+def _steps(rng: np.random.Generator, dt: float) -> int:
+    """The episode's length in steps: the first draw of its seed."""
+    return round(float(rng.uniform(*DURATION)) / dt)
+
+
 def plan(steps: int, seed: int, controllers: Sequence[str], sensings: Sequence[str],
          dt: float = Params().dt) -> list[tuple[int, str, str]]:
     """(seed, controller, sensing) of the episodes of a run: episode ``i`` has seed
@@ -139,8 +144,7 @@ def plan(steps: int, seed: int, controllers: Sequence[str], sensings: Sequence[s
     out, total, i = [], 0, 0
     while total < steps:
         s = seed * SEED_STRIDE + i
-        rng = np.random.default_rng(s)      # the first draw of :func:`draw` is the duration
-        total += round(round(float(rng.uniform(*DURATION)) / dt) * dt / dt)
+        total += _steps(np.random.default_rng(s), dt)
         out.append((s, *pairs[i % len(pairs)]))
         i += 1
     return out
