@@ -4,7 +4,7 @@
 Every episode is drawn from its own seed (:func:`draw`): a walled arena with up to
 ``MAX_PILLARS`` round pillars, a person who walks a random script of the soak's kinds of phase
 but faster (up to 2 m/s, stops, sharp turns, turnarounds on the spot; :data:`WALKER`), a
-formation 0.3-3 m away at any bearing, and a robot that starts in its slot, or anywhere nearby
+formation 0.3-3 m away at any bearing, and a robot that starts at rest in its slot, or nearby
 at rest or already moving. The controller and the sensing profile come with the episode's
 index (:func:`plan`), so every pair gets the same share of the steps.
 :func:`episode_counts` reduces an episode's log to counts; the definitions are in its
@@ -89,8 +89,8 @@ def _start(rng: np.random.Generator, kind: str, params: Params
            ) -> tuple[Pose | None, tuple[float, float] | None, float]:
     """Robot start pose, velocity and the room (m) it needs to stop, for a person standing
     at the origin."""
-    if kind == "slot":
-        return None, None, 0.0
+    if kind == "slot":      # at rest: the slot's own velocity can exceed the robot's limits
+        return None, (0.0, 0.0), 0.0
     v = float(rng.uniform(*START_V)) if kind == "moving" else 0.0
     w = float(rng.uniform(*START_OMEGA)) if kind == "moving" else 0.0
     room = stopping_room(v, params) + START_ROOM
