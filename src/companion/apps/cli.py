@@ -1,5 +1,5 @@
 """Command-line interface: ``companion run | scenarios | convergence | pedestrians | soak |
-reproduce | tune | bench`` (the commands are in :mod:`companion.apps.commands`).
+fuzz | reproduce | tune | bench`` (the commands are in :mod:`companion.apps.commands`).
 
 Bad usage or bad input files exit with code 2 and one line on stderr naming the file, line or
 key. Output files are written whole or not at all. Output cut short by the reader (``| head``)
@@ -151,6 +151,26 @@ def parser() -> argparse.ArgumentParser:
     sk.add_argument("--out", metavar="DIR", help="output folder (default out/soak)")
     _sensing(sk)
     sk.set_defaults(func="cmd_soak")
+
+    fz = sub.add_parser("fuzz", help="random closed-loop episodes (walkers up to 2 m/s among "
+                        "pillars, any formation, random starts, every controller, ideal and "
+                        "realistic sensing; docs/safety.md); exit 1 on a collision or a "
+                        "robot-caused protective violation")
+    fz.add_argument("--steps", type=int, default=1_000_000, metavar="N",
+                    help="run episodes until at least N steps in all, 1 to 1e9 "
+                         "(default 1,000,000)")
+    fz.add_argument("--seed", type=int, default=0, metavar="S",
+                    help="seed 0 to 1e8; episode i has seed S * 10,000,000 + i (default 0)")
+    fz.add_argument("--controllers", metavar="A,B", help=f"controllers (default all: "
+                    f"{','.join(CONTROLLERS)})")
+    fz.add_argument("--sensing", metavar="A,B", help="sensing profiles (default: "
+                    "ideal,realistic)")
+    fz.add_argument("--replay", type=int, metavar="SEED", help="run the episode of this seed "
+                    "(a row of fuzz.csv) with one --controllers and one --sensing, and write "
+                    "its log.csv and episode.json")
+    fz.add_argument("--out", metavar="DIR", help="output folder (default out/fuzz)")
+    _workers(fz)
+    fz.set_defaults(func="cmd_fuzz")
 
     bn = sub.add_parser("bench", help="step latency per controller alone and in the full "
                         "stack, full-stack throughput, first-step time and memory "

@@ -10,6 +10,7 @@ import argparse
 import itertools
 import json
 import sys
+import time
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager, nullcontext
 from pathlib import Path
@@ -17,7 +18,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from companion import metrics
-from companion.apps import animate, benchmark, movie, plots, reproduce, table3, tune
+from companion.apps import animate, benchmark, fuzz, movie, plots, reproduce, table3, tune
 from companion.apps import pedestrians as walkers
 from companion.apps.args import (
     UsageError,
@@ -33,7 +34,7 @@ from companion.apps.args import (
     seed_arg,
     workers_arg,
 )
-from companion.apps.logfile import LogCsv, Thinned
+from companion.apps.logfile import LogCsv, Thinned, write_log
 from companion.control import CONTROLLERS, lookup
 from companion.data import pedestrians
 from companion.io import Outputs, save_figure, write_csv, write_json
@@ -264,6 +265,49 @@ def cmd_soak(args: argparse.Namespace) -> int:
           else "FAIL: a collision or a non-finite value")
     print(f"wrote {', '.join(written)} in {out}")
     return 0 if ok else 1
+
+
+def cmd_fuzz(args: argparse.Namespace) -> int:
+    controllers, sensings = fuzz.selection(args)
+    out = output_dir(Path(args.out or Path("out") / "fuzz"))
+    if args.replay is not None:
+        if len(controllers) != 1 or len(sensings) != 1:
+            raise UsageError("--replay: give the episode's controller and sensing as one "
+                             "--controllers NAME and one --sensing NAME (fuzz.csv has them)")
+        seed = fuzz.bounded_arg(args.replay, 0, fuzz.MAX_EPISODE_SEED, "--replay")
+        case, counts, log = fuzz.replay(seed, controllers[0], sensings[0])
+        with Outputs(out, "fuzz-replay") as stage:
+            write_log(stage / "log.csv", log)
+            write_json(stage / "episode.json", {"case": vars(case), "counts": counts})
+        print(json.dumps({"case": vars(case), "counts": counts}, indent=1))
+        print(f"wrote log.csv, episode.json in {out}")
+        return 1 if fuzz.failed(counts) else 0
+    steps = fuzz.bounded_arg(args.steps, 1, fuzz.MAX_STEPS, "--steps")
+    seed = fuzz.bounded_arg(args.seed, 0, fuzz.MAX_SEED, "--seed")
+    workers = workers_arg(args)
+    start = time.monotonic()
+    print(f"fuzz: >= {steps:,} steps, seed {seed}, {', '.join(controllers)} x "
+          f"{', '.join(sensings)} sensing")
+    episodes = fuzz.plan(steps, seed, controllers, sensings)
+    with progress_bar(len(episodes), "episode") as progress:
+        cases, counts = fuzz.run(episodes, workers, progress)
+    pairs, total = fuzz.by_pair(cases, counts)
+    failed = fuzz.failures(cases, counts)
+    report = {"steps_requested": steps, "seed": seed, "controllers": list(controllers),
+              "sensing": list(sensings), "wall_time_s": round(time.monotonic() - start, 1),
+              "total": total, "by_pair": pairs, "failed": failed}
+    with Outputs(out, "fuzz") as stage:
+        write_json(stage / "fuzz.json", report)
+        write_csv(stage / "fuzz.csv", fuzz.COLUMNS, fuzz.csv_rows(cases, counts))
+    print(fuzz.table(pairs, total))
+    for f in failed[:20]:
+        print(f"FAIL seed {f['seed']} {f['controller']}/{f['sensing']}: replay with companion "
+              f"fuzz --replay {f['seed']} --controllers {f['controller']} --sensing "
+              f"{f['sensing']}")
+    print(f"{len(failed)} of {len(cases)} episodes failed (a collision, a robot-caused "
+          f"protective violation or a non-finite value); {report['wall_time_s']:g} s")
+    print(f"wrote fuzz.json, fuzz.csv in {out}")
+    return 1 if failed else 0
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:

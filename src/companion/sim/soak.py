@@ -41,35 +41,72 @@ class SoakWorld:
     person: ScriptedWalk
 
 
-def arena_walls() -> tuple[Wall, ...]:
-    a = ARENA
+@dataclass(frozen=True)
+class Walker:
+    """The mix of a random walker's phases: the share of each kind and the ranges (lo, hi)
+    their durations (s), speeds (m/s) and turn rates (rad/s) are drawn from (a range with
+    lo == hi is that value, drawing nothing). The defaults are the soak's walker; the
+    closed-loop fuzz (:mod:`companion.sim.fuzz`) walks faster."""
+
+    walk_share: float = 0.45
+    stop_share: float = 0.2
+    sharp_share: float = 0.2          # the rest: turnarounds on the spot
+    walk_time: tuple[float, float] = (2.0, 8.0)
+    walk_speed: tuple[float, float] = (0.5, 1.5)
+    straight_share: float = 0.6       # of the walks; the others curve gently
+    curve_rate: float = 0.4
+    stop_time: tuple[float, float] = (0.5, 3.0)
+    sharp_time: tuple[float, float] = (0.6, 1.2)
+    sharp_speed: tuple[float, float] = (0.6, 0.6)
+    sharp_rate: tuple[float, float] = (1.0, 2.0)
+    turnaround_speed: tuple[float, float] = (1.0, 1.0)
+
+
+def _draw(rng: np.random.Generator, span: tuple[float, float]) -> float:
+    lo, hi = span
+    return lo if lo == hi else float(rng.uniform(lo, hi))
+
+
+def arena_walls(half: float = ARENA) -> tuple[Wall, ...]:
+    a = half
     return (Wall(-a, -a, a, -a), Wall(a, -a, a, a), Wall(a, a, -a, a), Wall(-a, a, -a, -a))
 
 
-def pillars(rng: np.random.Generator, keep_free: float = 3.0) -> tuple[Circle, ...]:
-    """Round pillars at least 3 m apart, none within ``keep_free`` m of the origin (start)."""
+def pillars(rng: np.random.Generator, keep_free: float = 3.0, count: int = PILLARS,
+            half: float = ARENA, spacing: float = 3.0,
+            keep_clear: tuple[tuple[float, float, float], ...] = ()) -> tuple[Circle, ...]:
+    """``count`` round pillars at least ``spacing`` m apart and 2.5 m inside the walls, none
+    centred within ``keep_free`` m of the origin (the start) or within ``r`` m of any (x, y, r)
+    of ``keep_clear``; fewer if 100 draws per pillar find no room."""
     out: list[Circle] = []
-    while len(out) < PILLARS:
-        x, y = rng.uniform(-ARENA + 2.5, ARENA - 2.5, 2)
+    for _ in range(100 * count):
+        if len(out) == count:
+            break
+        x, y = rng.uniform(-half + 2.5, half - 2.5, 2)
         r = float(rng.uniform(*PILLAR_RADIUS))
-        if math.hypot(x, y) < keep_free or any(math.hypot(x - c.x, y - c.y) < 3.0 for c in out):
+        if math.hypot(x, y) < keep_free or any(math.hypot(x - c.x, y - c.y) < spacing
+                                               for c in out) \
+                or any(math.hypot(x - px, y - py) < d for px, py, d in keep_clear):
             continue
         out.append(Circle(float(x), float(y), r))
     return tuple(out)
 
 
-def _random_move(rng: np.random.Generator) -> list[Move]:
+def _random_move(rng: np.random.Generator, w: Walker) -> list[Move]:
     r = rng.random()
-    if r < 0.45:      # walk straight or along a gentle curve
-        turn = 0.0 if rng.random() < 0.6 else float(rng.uniform(-0.4, 0.4))
-        return [Move(float(rng.uniform(2.0, 8.0)), float(rng.uniform(0.5, 1.5)), turn)]
-    if r < 0.65:      # stop
-        return [Move(float(rng.uniform(0.5, 3.0)), 0.0)]
-    if r < 0.85:      # sharp walking turn
+    if r < w.walk_share:      # walk straight or along a gentle curve
+        turn = 0.0 if rng.random() < w.straight_share else \
+            float(rng.uniform(-w.curve_rate, w.curve_rate))
+        return [Move(_draw(rng, w.walk_time), _draw(rng, w.walk_speed), turn)]
+    if r < w.walk_share + w.stop_share:      # stop
+        return [Move(_draw(rng, w.stop_time), 0.0)]
+    if r < w.walk_share + w.stop_share + w.sharp_share:      # sharp walking turn
         sign = 1.0 if rng.random() < 0.5 else -1.0
-        return [Move(float(rng.uniform(0.6, 1.2)), 0.6, sign * float(rng.uniform(1.0, 2.0)))]
+        return [Move(_draw(rng, w.sharp_time), _draw(rng, w.sharp_speed),
+                     sign * _draw(rng, w.sharp_rate))]
     sign = 1.0 if rng.random() < 0.5 else -1.0   # turnaround on the spot
-    return [Move(1.0, 0.0), Move(1.0, 0.0, sign * math.pi), Move(3.0, 1.0)]
+    return [Move(1.0, 0.0), Move(1.0, 0.0, sign * math.pi),
+            Move(3.0, _draw(rng, w.turnaround_speed))]
 
 
 def _clear(rows: list[Row], obstacles: tuple[Obstacle, ...], margin: float) -> bool:
@@ -79,17 +116,19 @@ def _clear(rows: list[Row], obstacles: tuple[Obstacle, ...], margin: float) -> b
 
 
 def random_walk(rng: np.random.Generator, duration: float, obstacles: tuple[Obstacle, ...],
-                person_margin: float) -> ScriptedWalk:
-    """A seeded random script of at least ``duration`` s whose path keeps ``person_margin``
-    from every obstacle: each drawn phase is tried out, together with stopping after it, and
-    redrawn if it comes too close; when 50 draws fail the person stops and turns on the
-    spot (safe: the last phase was checked with its stop)."""
-    row: Row = (0.0, 0.0, 0.0, 0.0, 0.0)
+                person_margin: float, walker: Walker = Walker(),
+                start: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> ScriptedWalk:
+    """A seeded random script of ``walker`` phases from ``start``, at least ``duration`` s
+    long, whose path keeps ``person_margin`` from every obstacle: each drawn phase is tried
+    out, together with stopping after it, and redrawn if it comes too close; when 50 draws
+    fail the person stops and turns on the spot (safe: the last phase was checked with its
+    stop)."""
+    row: Row = (*start, 0.0, 0.0)
     moves: list[Move] = []
     t = 0.0
     while t < duration:
         for _ in range(50):
-            cand = _random_move(rng)
+            cand = _random_move(rng, walker)
             rows, r = [], row
             for m in cand:
                 rows += integrate_move(r, m, WALKER_ACCEL, GRID)
@@ -106,7 +145,7 @@ def random_walk(rng: np.random.Generator, duration: float, obstacles: tuple[Obst
         moves += cand
         row = rows[-1]
         t += sum(m.duration for m in cand)
-    return ScriptedWalk((0.0, 0.0, 0.0), moves, accel=WALKER_ACCEL, grid_step=GRID)
+    return ScriptedWalk(start, moves, accel=WALKER_ACCEL, grid_step=GRID)
 
 
 def make_world(seed: int, duration: float, person_margin: float = 1.2) -> SoakWorld:

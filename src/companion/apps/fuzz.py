@@ -1,0 +1,103 @@
+"""``companion fuzz``: the closed-loop fuzz (:mod:`companion.sim.fuzz`) over many episodes,
+its table, fuzz.json and fuzz.csv, and the replay of one episode."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from functools import partial
+
+from companion.apps.args import UsageError
+from companion.control import CONTROLLERS
+from companion.params import PROFILES, Params
+from companion.sim import fuzz
+from companion.sim.runner import run_many, run_one
+from companion.types import Log
+
+#: Bounds of --steps and --seed (the episode seeds stay below 2**63).
+MAX_STEPS = 1_000_000_000
+MAX_SEED = 100_000_000
+MAX_EPISODE_SEED = (MAX_SEED + 1) * fuzz.SEED_STRIDE - 1
+COLUMNS = (*(f.name for f in dataclasses.fields(fuzz.Case)), *fuzz.COUNTS, "failed")
+
+
+def names_arg(text: str | None, known: Sequence[str], flag: str) -> tuple[str, ...]:
+    """A comma-separated list of names from ``known`` (all of them when ``text`` is None)."""
+    if text is None:
+        return tuple(known)
+    names = tuple(n.strip() for n in text.split(","))
+    bad = [n for n in names if n not in known]
+    if bad or not names or len(set(names)) != len(names):
+        raise UsageError(f"{flag}: expected distinct names from {', '.join(known)} separated "
+                         f"by commas, got {text!r}")
+    return names
+
+
+def bounded_arg(value: int, low: int, high: int, flag: str) -> int:
+    if not low <= value <= high:
+        raise UsageError(f"{flag}: expected a whole number in [{low}, {high:,}], got {value}")
+    return value
+
+
+def selection(args) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The controllers and sensing profiles of --controllers and --sensing."""
+    return (names_arg(args.controllers, tuple(CONTROLLERS), "--controllers"),
+            names_arg(args.sensing, tuple(PROFILES), "--sensing"))
+
+
+plan, failed = fuzz.plan, fuzz.failed
+
+
+def run(episodes: Sequence[tuple[int, str, str]], workers: int | None,
+        progress: Callable[[int], None] | None = None
+        ) -> tuple[list[fuzz.Case], list[dict]]:
+    """Draw and run the ``episodes`` of :func:`plan`; their cases and counts, in order."""
+    drawn = [fuzz.draw(*episode) for episode in episodes]
+    counts = run_many([spec for _, spec in drawn], workers,
+                      summarize=partial(fuzz.episode_counts, params=Params()),
+                      progress=progress)
+    return [case for case, _ in drawn], counts
+
+
+def replay(seed: int, controller: str, sensing: str) -> tuple[fuzz.Case, dict, Log]:
+    """One episode again: its case, counts and log."""
+    case, spec = fuzz.draw(seed, controller, sensing)
+    log = run_one(spec)
+    return case, fuzz.episode_counts(log, Params()), log
+
+
+def csv_rows(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> list[tuple]:
+    return [(*dataclasses.astuple(c), *(n[k] for k in fuzz.COUNTS), int(fuzz.failed(n)))
+            for c, n in zip(cases, counts)]
+
+
+def by_pair(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> tuple[dict[str, dict], dict]:
+    """Totals per "controller/sensing", in the order the pairs first appear, and of all."""
+    groups: dict[str, list[dict]] = {}
+    for c, n in zip(cases, counts):
+        groups.setdefault(f"{c.controller}/{c.sensing}", []).append(n)
+    return {pair: fuzz.totals(rows) for pair, rows in groups.items()}, fuzz.totals(counts)
+
+
+def failures(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> list[dict]:
+    return [{"seed": c.seed, "controller": c.controller, "sensing": c.sensing,
+             **{k: n[k] for k in ("person_collisions", "obstacle_collisions", "violations",
+                                  "violations_estimate", "nonfinite_steps",
+                                  "min_person_distance_m", "min_obstacle_clearance_m")}}
+            for c, n in zip(cases, counts) if fuzz.failed(n)]
+
+
+def table(pairs: dict[str, dict], total: dict) -> str:
+    head = (f"{'controller/sensing':22s} {'episodes':>8s} {'steps':>9s} {'person':>6s} "
+            f"{'obstacle':>8s} {'inside':>6s} {'robot':>5s} {'(est.)':>6s} {'nonfin':>6s} "
+            f"{'ok':>6s} {'degr.':>6s} {'stop':>6s} {'closest':>7s}")
+    lines = [f"{'':22s} {'':>8s} {'':>9s} {'collisions':>15s} {'protective steps':>20s}", head]
+    for name, t in [*pairs.items(), ("all", total)]:
+        n = max(t["steps"], 1)
+        lines.append(
+            f"{name:22s} {t['episodes']:8d} {t['steps']:9d} {t['person_collisions']:6d} "
+            f"{t['obstacle_collisions']:8d} {t['protective_steps']:6d} {t['violations']:5d} "
+            f"{t['violations_estimate']:6d} {t['nonfinite_steps']:6d} "
+            f"{t['ok_steps'] / n:6.1%} {t['degraded_steps'] / n:6.1%} "
+            f"{t['stopped_steps'] / n:6.1%} {t['min_person_distance_m']:7.3f}")
+    return "\n".join(lines)

@@ -1,0 +1,156 @@
+"""Closed-loop fuzz (companion.sim.fuzz): what an episode draws, how it is counted, and a short
+run of every controller with ideal and realistic sensing (``companion fuzz`` runs 1,000,000
+steps; docs/safety.md)."""
+
+import math
+from functools import partial
+
+import numpy as np
+import pytest
+
+from companion.control import CONTROLLERS
+from companion.geometry import obstacle_arrays, path_clearance
+from companion.params import PROFILES, Params
+from companion.sim import fuzz
+from companion.sim.episode import nearest_clearance, start_in_slot
+from companion.sim.runner import run_many
+from companion.types import LOG_COLUMNS, Log, PersonState
+
+SEEDS = range(40)
+
+
+@pytest.fixture(scope="module")
+def drawn():
+    return [fuzz.draw(s, "lqr", "ideal") for s in SEEDS]
+
+
+def test_the_draws_cover_the_ranges_and_start_clear(drawn):
+    params = Params()
+    kinds, bearings, fast = set(), [], 0
+    for case, spec in drawn:
+        assert fuzz.DISTANCE[0] <= case.distance_drawn <= fuzz.DISTANCE[1]
+        assert case.distance >= case.distance_drawn
+        assert spec.params.formation.distance == case.distance      # accepted by Params
+        assert fuzz.DURATION[0] - 0.05 <= spec.duration <= fuzz.DURATION[1] + 0.05
+        kinds.add(case.start)
+        bearings.append(case.bearing)
+        h0 = spec.person.state(0.0)
+        robot = spec.start or start_in_slot(h0, spec.params)
+        v0 = spec.start_velocity[0] if spec.start_velocity else 0.0
+        room = fuzz.stopping_room(v0, spec.params)
+        assert nearest_clearance(robot.x, robot.y, spec.obstacles, params.robot.radius) > room
+        assert math.hypot(robot.x - h0.x, robot.y - h0.y) > \
+            params.keepout.protective_distance + (room if spec.start else 0.0)
+        t = np.arange(0.0, spec.duration, 0.05)
+        states = [spec.person.state(x) for x in t]
+        xs, ys = np.array([h.x for h in states]), np.array([h.y for h in states])
+        assert path_clearance(xs, ys, obstacle_arrays(spec.obstacles), 0.0) >= \
+            case.person_margin - 1e-9
+        v = np.array([h.v for h in states])
+        assert np.max(v) <= 2.0 + 1e-9
+        fast += np.max(v) > 1.8
+    assert kinds == set(fuzz.START_KINDS)
+    assert min(bearings) < 1.0 and max(bearings) > 2 * math.pi - 1.0
+    assert fast >= 5
+    assert any(c.pillars == 0 for c, _ in drawn) or max(c.pillars for c, _ in drawn) >= 10
+
+
+def test_an_infeasible_formation_moves_out_to_the_protective_ring():
+    params = Params()
+    for bearing in np.linspace(0.0, 2 * math.pi, 13)[:-1]:
+        d = fuzz.feasible_distance(0.3, bearing, params)
+        f = params.formation.__class__(d, bearing)
+        centre = start_in_slot(PersonState(0.0, 0.0, 0.0, 0.0, 0.0), params.replace(formation=f))
+        assert math.hypot(centre.x, centre.y) == pytest.approx(0.61, abs=1e-9)
+    assert fuzz.feasible_distance(2.0, math.pi, params) == 2.0
+
+
+def test_an_episode_depends_on_its_seed_alone():
+    a_case, a = fuzz.draw(7, "pid", "realistic")
+    b_case, b = fuzz.draw(7, "lqr", "ideal")
+    assert a.obstacles == b.obstacles and a.start == b.start
+    assert a.person.state(20.0) == b.person.state(20.0)
+    assert a.params.sensing == PROFILES["realistic"] and b.params.sensing == PROFILES["ideal"]
+    assert fuzz.draw(8, "lqr", "ideal")[1].obstacles != b.obstacles
+
+
+def test_the_plan_reaches_the_steps_and_shares_them_between_the_pairs():
+    episodes = fuzz.plan(20_000, 3, ["lqr", "pid"], ["ideal", "realistic"])
+    steps = [fuzz.draw(*e)[1].duration / Params().dt for e in episodes]
+    assert sum(steps) >= 20_000 > sum(steps[:-1])
+    assert [e[0] for e in episodes] == [3 * fuzz.SEED_STRIDE + i for i in range(len(episodes))]
+    pairs = [(c, s) for _, c, s in episodes]
+    assert pairs[:4] == [("lqr", "ideal"), ("pid", "ideal"), ("lqr", "realistic"),
+                         ("pid", "realistic")]
+
+
+def _log(robot_x, person_x, estimate_x=None):
+    n = len(robot_x)
+    c = {k: np.zeros(n) for k in LOG_COLUMNS}
+    c["t"] = np.arange(n) * Params().dt
+    c["robot_x"], c["person_x"] = np.asarray(robot_x, float), np.asarray(person_x, float)
+    c["person_est_x"] = np.asarray(person_x if estimate_x is None else estimate_x, float)
+    c["rho_ob"] = np.full(n, 5.0)
+    c["status"], c["reason"] = np.array(["ok"] * n), np.array([""] * n)
+    return Log(c)
+
+
+def test_only_the_robots_own_approach_inside_the_protective_distance_is_a_violation():
+    params = Params()
+    towards = fuzz.episode_counts(_log(np.linspace(0.0, 0.5, 11), np.full(11, 0.8)), params)
+    # the robot drives from 0.8 m to 0.3 m of a standing person: 0.45, 0.40, 0.35 -> 0.30
+    assert (towards["protective_steps"], towards["violations"]) == (4, 3)
+    assert towards["person_collisions"] == 1 and fuzz.failed(towards)
+    walked_in = fuzz.episode_counts(_log(np.zeros(11), np.linspace(0.8, 0.3, 11)), params)
+    assert walked_in["protective_steps"] == 4 and walked_in["violations"] == 0
+    assert walked_in["person_collisions"] == 1          # a collision all the same
+    misled = fuzz.episode_counts(_log(np.linspace(0.0, 0.5, 11), np.full(11, 0.8),
+                                      estimate_x=np.full(11, 3.0)), params)
+    assert misled["violations"] == misled["violations_estimate"] == 3
+    away = fuzz.episode_counts(_log(np.linspace(0.33, -0.17, 11), np.full(11, 0.8)), params)
+    assert away["protective_steps"] == 1 and away["violations"] == 0 and not fuzz.failed(away)
+
+
+# The first episodes of ``companion fuzz`` (seed 0, every controller, both profiles).
+SHORT_STEPS = 20_000
+
+
+@pytest.fixture(scope="module")
+def short_run():
+    episodes = fuzz.plan(SHORT_STEPS, 0, list(CONTROLLERS), list(PROFILES))
+    drawn = [fuzz.draw(*e) for e in episodes]
+    counts = run_many([spec for _, spec in drawn],
+                      summarize=partial(fuzz.episode_counts, params=Params()))
+    return [case for case, _ in drawn], counts
+
+
+def test_short_fuzz_covers_every_pair_and_stays_finite(short_run):
+    cases, counts = short_run
+    total = fuzz.totals(counts)
+    assert total["steps"] >= SHORT_STEPS
+    assert {(c.controller, c.sensing) for c in cases} == \
+        {(c, s) for c in CONTROLLERS for s in PROFILES}
+    assert total["nonfinite_steps"] == 0
+
+
+# Measured 2026-11-25 (docs/safety.md, "Closed-loop fuzz"): the short run's failing episodes
+# are seed 8 (lqr-tuned/realistic, obstacle collision), 10 (vsm/realistic, the person walked
+# into the robot), 21 (pid/realistic, person collision with 2 robot-caused steps, both closing
+# on a person the estimate put 0.1 m farther away) and 24 (lqr/ideal, the person walked into
+# the robot). Obstacle braking along turning paths is being fixed in control/keepout.py on
+# another branch.
+@pytest.mark.xfail(strict=True, reason="seed 21 pid/realistic: 2 robot-caused steps inside "
+                   "the protective distance, the estimate 0.1 m farther than the person")
+def test_short_fuzz_no_robot_caused_violation(short_run):
+    cases, counts = short_run
+    assert [c.seed for c, n in zip(cases, counts) if n["violations"]] == []
+
+
+@pytest.mark.xfail(strict=True, reason="obstacle collision of lqr-tuned/realistic (seed 8) "
+                   "and person collisions (seeds 10, 21, 24; in 10 and 24 the person walked "
+                   "into the robot)")
+def test_short_fuzz_no_collision(short_run):
+    cases, counts = short_run
+    bad = [(c.seed, c.controller, c.sensing) for c, n in zip(cases, counts)
+           if n["person_collisions"] or n["obstacle_collisions"]]
+    assert bad == []

@@ -1,0 +1,80 @@
+"""``companion fuzz``: outputs, replay, exit codes and bad flags."""
+
+import csv
+import json
+
+import pytest
+
+from companion.apps.cli import main
+from companion.sim import fuzz
+
+
+def run(argv, capsys):
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse usage errors
+        code = exc.code
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_fuzz_writes_one_row_per_episode_and_a_replay_gives_the_same_counts(tmp_path, capsys):
+    code, out, _ = run(["fuzz", "--steps", "600", "--seed", "2", "--controllers", "lqr,pid",
+                        "--sensing", "ideal", "--workers", "1", "--out", str(tmp_path)], capsys)
+    with open(tmp_path / "fuzz.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    report = json.loads((tmp_path / "fuzz.json").read_text())
+    assert sum(int(r["steps"]) for r in rows) == report["total"]["steps"] >= 600
+    assert [r["controller"] for r in rows][:2] == ["lqr", "pid"]
+    assert {r["sensing"] for r in rows} == {"ideal"}
+    assert int(rows[0]["seed"]) == 2 * fuzz.SEED_STRIDE
+    failed = [r for r in rows if r["failed"] == "1"]
+    assert code == (1 if failed else 0)
+    assert len(report["failed"]) == len(failed)
+    assert set(report["by_pair"]) == {"lqr/ideal", "pid/ideal"}
+    assert "lqr/ideal" in out and "all" in out
+    row = rows[0]
+    code, out, _ = run(["fuzz", "--replay", row["seed"], "--controllers", "lqr", "--sensing",
+                        "ideal", "--out", str(tmp_path)], capsys)
+    assert code == int(row["failed"])
+    episode = json.loads((tmp_path / "episode.json").read_text())
+    for key in fuzz.COUNTS:
+        assert float(row[key]) == pytest.approx(episode["counts"][key], rel=1e-9)
+    with open(tmp_path / "log.csv") as fh:
+        assert sum(1 for _ in fh) == int(row["steps"]) + 1
+    assert (tmp_path / "fuzz.csv").exists()             # the replay kept the run's files
+
+
+def test_fuzz_exits_1_and_names_the_seed_of_a_failing_episode(tmp_path, capsys, monkeypatch):
+    real = fuzz.episode_counts
+
+    def collided(log, params):
+        counts = real(log, params)
+        return dict(counts, obstacle_collisions=1)
+
+    monkeypatch.setattr(fuzz, "episode_counts", collided)
+    code, out, _ = run(["fuzz", "--steps", "1", "--controllers", "vsm", "--sensing",
+                        "realistic", "--workers", "1", "--out", str(tmp_path)], capsys)
+    assert code == 1
+    assert "FAIL seed 0 vsm/realistic: replay with companion fuzz --replay 0" in out
+    assert json.loads((tmp_path / "fuzz.json").read_text())["failed"][0]["seed"] == 0
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--steps", "0"], "--steps: expected a whole number in [1, 1,000,000,000], got 0"),
+    (["--steps", "2e6"], "argument --steps: invalid int value: '2e6'"),
+    (["--seed", "-1"], "--seed: expected a whole number in [0, 100,000,000], got -1"),
+    (["--controllers", "lqr,foo"], "--controllers: expected distinct names from lqr, lqr-paper"),
+    (["--controllers", "lqr,lqr"], "--controllers: expected distinct names"),
+    (["--sensing", "noisy"], "--sensing: expected distinct names from ideal, realistic"),
+    (["--workers", "0"], "--workers: expected a whole number >= 1, got 0"),
+    (["--replay", "3"], "--replay: give the episode's controller and sensing"),
+    (["--replay", "-3", "--controllers", "lqr", "--sensing", "ideal"], "--replay: expected a "
+     "whole number in [0,"),
+])
+def test_bad_fuzz_flags_exit_2_with_one_line(argv, message, capsys, tmp_path):
+    code, out, err = run(["fuzz", *argv, "--out", str(tmp_path)], capsys)
+    assert code == 2
+    assert message in err
+    assert err.count("\n") == 1
+    assert not list(tmp_path.iterdir())
