@@ -67,7 +67,7 @@ def test_fuzz_exits_1_and_names_the_seed_of_a_failing_episode(tmp_path, capsys, 
     (["--controllers", "lqr,foo"], "--controllers: expected distinct names from lqr, lqr-paper"),
     (["--controllers", "lqr,lqr"], "--controllers: expected distinct names"),
     (["--sensing", "noisy"], "--sensing: expected distinct names from ideal, realistic"),
-    (["--workers", "0"], "--workers: expected a whole number >= 1, got 0"),
+    (["--workers", "0"], "--workers: expected 1 <= N <= 256, got '0'"),
     (["--replay", "3"], "--replay: give the episode's controller and sensing"),
     (["--replay", "-3", "--controllers", "lqr", "--sensing", "ideal"], "--replay: expected a "
      "whole number in [0,"),
