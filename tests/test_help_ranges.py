@@ -7,7 +7,7 @@ from companion.apps.cli import parser
 from companion.apps.flags import FLAGS
 
 #: Metavars of flags that take numbers.
-NUMERIC = {"S", "M", "RAD", "X,Y,THETA", "V1,V2", "MPS", "N", "X"}
+NUMERIC = {"S", "M", "RAD", "X,Y,THETA", "V1,V2", "MPS", "N", "X", "SEED"}
 
 
 def subcommands():

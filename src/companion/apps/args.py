@@ -67,10 +67,10 @@ def duration_arg(text: str, what: str = "--duration", dt: float | None = None) -
     return value
 
 
-def int_arg(value: int | None, flag: str) -> int | None:
+def int_arg(value: int | None, flag: str, metavar: str = "N") -> int | None:
     """A whole-number flag in its range (None: not given)."""
     if value is not None:
-        ranged((value,), str(value), flag, "N")
+        ranged((value,), str(value), flag, metavar)
     return value
 
 

@@ -157,17 +157,18 @@ def parser() -> argparse.ArgumentParser:
                         "realistic sensing; docs/safety.md); exit 1 on a collision or a "
                         "robot-caused protective violation")
     fz.add_argument("--steps", type=int, default=1_000_000, metavar="N",
-                    help="run episodes until at least N steps in all, 1 to 1e9 "
-                         "(default 1,000,000)")
-    fz.add_argument("--seed", type=int, default=0, metavar="S",
-                    help="seed 0 to 1e8; episode i has seed S * 10,000,000 + i (default 0)")
+                    help="run episodes until at least N steps in all, "
+                         f"{rng('--steps', 'N')} (default 1,000,000)")
+    fz.add_argument("--seed", type=int, default=0, metavar="N",
+                    help=f"seed, {rng('--seed', 'N')}; episode i has seed N * 10,000,000 + i "
+                         "(default 0)")
     fz.add_argument("--controllers", metavar="A,B", help=f"controllers (default all: "
                     f"{','.join(CONTROLLERS)})")
     fz.add_argument("--sensing", metavar="A,B", help="sensing profiles (default: "
                     "ideal,realistic)")
     fz.add_argument("--replay", type=int, metavar="SEED", help="run the episode of this seed "
-                    "(a row of fuzz.csv) with one --controllers and one --sensing, and write "
-                    "its log.csv and episode.json")
+                    f"({rng('--replay', 'SEED')}; a row of fuzz.csv) with one --controllers and "
+                    "one --sensing, and write its log.csv and episode.json")
     fz.add_argument("--out", metavar="DIR", help="output folder (default out/fuzz)")
     _workers(fz)
     fz.set_defaults(func="cmd_fuzz")

@@ -274,7 +274,7 @@ def cmd_fuzz(args: argparse.Namespace) -> int:
         if len(controllers) != 1 or len(sensings) != 1:
             raise UsageError("--replay: give the episode's controller and sensing as one "
                              "--controllers NAME and one --sensing NAME (fuzz.csv has them)")
-        seed = fuzz.bounded_arg(args.replay, 0, fuzz.MAX_EPISODE_SEED, "--replay")
+        seed = int_arg(args.replay, "--replay", "SEED")
         case, counts, log = fuzz.replay(seed, controllers[0], sensings[0])
         with Outputs(out, "fuzz-replay") as stage:
             write_log(stage / "log.csv", log)
@@ -282,8 +282,8 @@ def cmd_fuzz(args: argparse.Namespace) -> int:
         print(json.dumps({"case": vars(case), "counts": counts}, indent=1))
         print(f"wrote log.csv, episode.json in {out}")
         return 1 if fuzz.failed(counts) else 0
-    steps = fuzz.bounded_arg(args.steps, 1, fuzz.MAX_STEPS, "--steps")
-    seed = fuzz.bounded_arg(args.seed, 0, fuzz.MAX_SEED, "--seed")
+    steps = int_arg(args.steps, "--steps", "N")
+    seed = seed_arg(args.seed)
     workers = workers_arg(args)
     start = time.monotonic()
     print(f"fuzz: >= {steps:,} steps, seed {seed}, {', '.join(controllers)} x "

@@ -55,6 +55,9 @@ FLAGS: dict[str, Bound] = {
     "--wait": Bound(0.0, 3600.0, True, "s"),
     "--rate": Bound(0.0, 100.0, True),
     "--domain-id": Bound(0, 232),
+    "--steps": Bound(1, 1_000_000_000, high_text="1e9"),
+    #: fuzz episode seeds: run seed * 10**7 + episode index (companion.sim.fuzz.SEED_STRIDE)
+    "--replay": Bound(0, (2**63) * 10**7 - 1, high_text="2**63*10**7-1"),
 }
 
 

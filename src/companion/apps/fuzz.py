@@ -8,6 +8,7 @@ from collections.abc import Callable, Sequence
 from functools import partial
 
 from companion.apps.args import UsageError
+from companion.apps.flags import FLAGS
 from companion.control import CONTROLLERS
 from companion.params import PROFILES, Params
 from companion.sim import fuzz
@@ -15,8 +16,8 @@ from companion.sim.runner import run_many, run_one
 from companion.types import Log
 
 #: Bounds of --steps and --seed (the episode seeds stay below 2**63).
-MAX_STEPS = 1_000_000_000
-MAX_SEED = 100_000_000
+MAX_STEPS = FLAGS["--steps"].high
+MAX_SEED = FLAGS["--seed"].high
 MAX_EPISODE_SEED = (MAX_SEED + 1) * fuzz.SEED_STRIDE - 1
 COLUMNS = (*(f.name for f in dataclasses.fields(fuzz.Case)), *fuzz.COUNTS, "failed")
 
