@@ -12,13 +12,14 @@ A config class is a frozen dataclass whose fields carry metadata:
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import difflib
 import math
 import tomllib
 import types
 import typing
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -246,20 +247,29 @@ class Validated:
         validate(self)
 
 
-def load_toml(path: str | Path) -> dict[str, Any]:
-    """Parse a TOML file; a missing file or a syntax error raises a one-line ConfigError."""
-    path = Path(path)
+@contextlib.contextmanager
+def reading(path: str | Path, kind: str) -> Iterator[None]:
+    """Turn the errors of opening and decoding the ``kind`` file ``path`` (a missing file, a
+    folder, bytes that are not UTF-8) into one-line ConfigErrors naming it."""
     try:
-        with path.open("rb") as fh:
-            return tomllib.load(fh)
+        yield
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such file") from None
     except IsADirectoryError:
-        raise ConfigError(f"{path}: is a directory, expected a TOML file") from None
+        raise ConfigError(f"{path}: is a directory, expected a {kind}") from None
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{path}: not UTF-8 text ({exc.reason})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: invalid TOML: {exc}") from None
+
+
+def load_toml(path: str | Path) -> dict[str, Any]:
+    """Parse a TOML file; a missing file or a syntax error raises a one-line ConfigError."""
+    path = Path(path)
+    with reading(path, "TOML file"):
+        try:
+            with path.open("rb") as fh:
+                return tomllib.load(fh)
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"{path}: invalid TOML: {exc}") from None
 
 
 def range_text(f: dataclasses.Field) -> str:

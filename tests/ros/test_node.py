@@ -176,7 +176,7 @@ def test_person_odometry_round_trip_keeps_what_was_measured():
         msg = convert.person_msg([p], "odometry", p.t, p.frame)
         back = convert.people_from(ts.deserialize_cdr(ts.serialize_cdr(
             msg, "nav_msgs/msg/Odometry"), "nav_msgs/msg/Odometry"), "odometry")[0]
-        for got, want in zip(back, p):
+        for got, want in zip(dataclasses.astuple(back), dataclasses.astuple(p)):
             assert got == pytest.approx(want) if want is not None else got is None
 
 

@@ -14,24 +14,11 @@ import numpy as np
 
 from companion.geometry import wrap_pi
 from companion.ros.messages import make
-from companion.types import Circle, Command, PersonEstimate, Pose, Scan
+from companion.types import Circle, Command, PersonDetection, PersonEstimate, Pose, Scan
 
-
-class Stamped(NamedTuple):
-    """A person seen at time ``t`` (s) in the named ROS frame: a position, and with the
-    ``odometry`` person type also the position covariance (m^2, row-major 2x2), heading (rad,
-    in the same frame), speed (m/s), turn rate (rad/s) and their standard deviations."""
-
-    t: float
-    x: float
-    y: float
-    frame: str
-    covariance: tuple[float, float, float, float] | None = None
-    heading: float | None = None
-    heading_std: float | None = None
-    speed: float | None = None
-    turn_rate: float | None = None
-    velocity_std: tuple[float, float] | None = None
+#: A person as the wire carries it: a :class:`PersonDetection` whose ``frame`` is the ROS
+#: frame name of its header (the node maps it to the tracker's frames).
+Stamped = PersonDetection
 
 
 class OdometrySample(NamedTuple):

@@ -21,6 +21,7 @@ from companion.config import (
     build,
     param,
     ranged,
+    reading,
     reject_unknown,
 )
 from companion.control import lookup, make_controller
@@ -176,20 +177,15 @@ def load_node_config(path: str | Path | None, node_name: str = "companion") -> N
         return config_from_mapping({})
     import yaml
 
-    try:
-        with open(path, encoding="utf-8") as fh:
-            doc = yaml.safe_load(fh)
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise ConfigError(f"{path}: is a directory, expected a parameters YAML") from None
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"{path}: not UTF-8 text ({exc.reason})") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = f" line {mark.line + 1}:" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise ConfigError(f"{path}:{line} invalid YAML: {problem}") from None
+    with reading(path, "parameters YAML"):
+        try:
+            with open(path, encoding="utf-8") as fh:
+                doc = yaml.safe_load(fh)
+        except yaml.YAMLError as exc:
+            mark = getattr(exc, "problem_mark", None)
+            line = f" line {mark.line + 1}:" if mark is not None else ""
+            problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+            raise ConfigError(f"{path}:{line} invalid YAML: {problem}") from None
     if not isinstance(doc, Mapping):
         raise ConfigError(f"{path}: expected '{node_name}: ros__parameters: ...' at the top")
     names = [k for k in (node_name, f"/{node_name}", "/**") if k in doc]

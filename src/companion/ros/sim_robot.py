@@ -10,6 +10,7 @@ stop at the deceleration limits when no command came for ``robot.command_timeout
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
@@ -18,7 +19,6 @@ from typing import Any
 
 from companion.params import Params
 from companion.ros import convert
-from companion.ros.convert import Stamped
 from companion.ros.settings import RosParams
 from companion.ros.transport import DEFAULT, SENSOR_DATA, Qos, Transport
 from companion.sim.episode import run_episode, timed_out
@@ -126,9 +126,9 @@ class WireRobot:
         if obs.detections:
             frames = {self.params.tracker.world_frame: r.odom_frame,
                       self.params.tracker.robot_frame: r.base_frame}
-            people = [Stamped(self.epoch + d.t, d.x, d.y, frames.get(d.frame, d.frame),
-                              d.covariance, d.heading, d.heading_std, d.speed, d.turn_rate,
-                              d.velocity_std) for d in obs.detections]
+            people = [dataclasses.replace(d, t=self.epoch + d.t,
+                                          frame=frames.get(d.frame, d.frame))
+                      for d in obs.detections]
             if r.person_type == "pose_array":
                 for frame in dict.fromkeys(p.frame for p in people):
                     group = [p for p in people if p.frame == frame]
