@@ -5,17 +5,8 @@ import json
 
 import pytest
 
-from companion.apps.cli import main
 from companion.sim import fuzz
-
-
-def run(argv, capsys):
-    try:
-        code = main(argv)
-    except SystemExit as exc:  # argparse usage errors
-        code = exc.code
-    out = capsys.readouterr()
-    return code, out.out, out.err
+from test_cli import run  # the CLI in-process: exit code, stdout, stderr
 
 
 def test_fuzz_writes_one_row_per_episode_and_a_replay_gives_the_same_counts(tmp_path, capsys):

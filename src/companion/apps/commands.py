@@ -125,13 +125,11 @@ def cmd_run(args: argparse.Namespace) -> int:
         blocks = iter([run_recorded(sc, bag_arg(args.bag))])
     else:
         blocks = started(stream_one(sc.episode()))
-    if target is not None:                  # an animation needs the whole log at the end
-        blocks = iter([Log.concat(list(blocks))])
     with Outputs(out, "run") as stage:      # the log goes to disk as the episode runs
         if target is None:
             m, written = _write_run(stage, sc, args.plot, blocks)
-        else:
-            log = next(blocks)
+        else:                               # an animation needs the whole log at the end
+            log = Log.concat(blocks)
             m, written = _write_run(stage, sc, args.plot, [log])
             written.append(animate.save_run(target, out, stage, sc, log))
     # Everything is written before anything is printed: a reader that goes away early
