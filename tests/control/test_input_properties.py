@@ -12,6 +12,7 @@ import pytest
 from hypothesis import strategies as st
 
 from companion.control import make_controller
+from companion.control.base import saturate
 from companion.params import Params
 from companion.types import Observation, PersonDetection, PersonState, Pose, Scan
 from sweeps import QUICK, SLOW, assert_none_failed, sweep
@@ -26,11 +27,18 @@ WILD = st.sampled_from([math.nan, math.inf, -math.inf, 0.0, -0.0, 1e308, -1e308,
 NUM = ANY | WILD | st.floats(-5.0, 5.0)
 
 
+def within_rate(cmd, v: float, omega: float) -> bool:
+    return abs(cmd.v - v) <= DV and abs(cmd.omega - omega) <= DW
+
+
 def drive(observations) -> None:
-    """Step the lqr stack through ``observations``; every command finite, within limits."""
+    """Step the lqr stack through ``observations``; every command finite, within the velocity
+    limits and within the acceleration limits of the previous command, except that once the
+    rate limits may restart from the first measured velocity (stops sent before any odometry
+    say nothing of how the robot moves)."""
     sup = make_controller("lqr", P)
     sup.reset()
-    prev = None
+    prev, restarted = None, False
     for obs in observations:
         try:
             cmd = sup.step(obs)
@@ -38,8 +46,11 @@ def drive(observations) -> None:
             raise AssertionError(f"step raised {type(exc).__name__}: {exc}") from None
         assert math.isfinite(cmd.v) and math.isfinite(cmd.omega), cmd
         assert abs(cmd.v) <= P.robot.v_max + 1e-9 and abs(cmd.omega) <= P.robot.omega_max + 1e-9
-        if prev is not None:
-            assert abs(cmd.v - prev.v) <= DV and abs(cmd.omega - prev.omega) <= DW
+        if prev is not None and not within_rate(cmd, prev.v, prev.omega):
+            assert not restarted and obs.robot_velocity is not None, (cmd, prev)
+            restarted = True
+            v, omega = saturate(*obs.robot_velocity, P.robot)
+            assert within_rate(cmd, v, omega), (cmd, obs.robot_velocity)
         prev = cmd
 
 

@@ -44,8 +44,7 @@ def test_the_loop_over_the_wire_equals_the_simulation(sensing):
     """With detections that carry everything the sensing model measures (nav_msgs/Odometry),
     node + sim-robot give the simulation's trajectory: the wire loses nothing but rounding."""
     spec, log, robot, _ = lockstep(sensing, "odometry", 20.0)
-    direct = run_one(dataclasses.replace(spec, obstacle_source="lidar",
-                                         start_velocity=(0.0, 0.0)))
+    direct = run_one(dataclasses.replace(spec, obstacle_source="lidar"))
     assert robot.commands == len(log) == 400
     for column in ("robot_x", "robot_y", "rho", "alpha"):
         np.testing.assert_allclose(log[column], direct[column], atol=1e-6)

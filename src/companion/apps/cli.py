@@ -205,12 +205,19 @@ def _ros_commands(sub) -> None:
                         "/cmd_vel out (docs/ros.md)")
     nd.add_argument("--params", metavar="FILE", help="ROS 2 parameters YAML "
                     "(companion: ros__parameters: ...)")
+    nd.add_argument("--scenario", metavar="NAME", help="take the controller and the "
+                    "companion parameters (formation, weights, limits) of this scenario, as "
+                    "`companion sim-robot NAME` runs it, instead of those of --params (whose "
+                    "ros section still applies)")
     nd.add_argument("--controller", choices=CONTROLLERS,
                     help="controller (default: the parameters', lqr)")
     nd.add_argument("--duration", metavar="S", help="stop after S s of the node's time, "
                     f"{rng('--duration', 'S')} (default: run until SIGINT or SIGTERM)")
     nd.add_argument("--bag", metavar="DIR", help="record what the node receives and sends, "
                     "and a Foxglove scene, as a ROS 2 bag (MCAP) (docs/recording.md)")
+    nd.add_argument("--sensing", metavar="PROFILE", help="ideal, realistic or a TOML file "
+                    "of sensing keys: the base's actuator lag the node allows for, as sim-robot "
+                    "--sensing (docs/sensing.md); default: the parameters'")
     _transport(nd)
     nd.set_defaults(func="rosapps.cmd_node")
 
@@ -223,6 +230,9 @@ def _ros_commands(sub) -> None:
                     help="message type of the person detections (default: point)")
     sr.add_argument("--rate", metavar="X", help=f"real-time factor, {rng('--rate', 'X')}; "
                     "other than 1 publishes /clock (use_sim_time) (default 1)")
+    sr.add_argument("--lockstep", action="store_true", help="lock step with the node: "
+                    "publish /clock and move on only once the node answered each period's "
+                    "/clock (at most 2 s); the node needs ros.use_sim_time")
     sr.add_argument("--wait", default="10", metavar="S", help="wait up to S s for the node's "
                     f"first command before starting, {rng('--wait', 'S')} (default 10)")
     sr.add_argument("--duration", metavar="S", help=f"simulated time, {rng('--duration', 'S')}")

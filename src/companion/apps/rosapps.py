@@ -7,7 +7,6 @@ import argparse
 import dataclasses
 import signal
 import threading
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -19,6 +18,7 @@ from companion.apps.args import (
     number_arg,
     output_dir,
     seed_arg,
+    with_sensing,
 )
 from companion.apps.bags import bag_arg, bag_outputs
 from companion.io import Outputs, write_json
@@ -38,6 +38,10 @@ def _ros_overrides(ros, args: argparse.Namespace):
     if args.domain_id is not None:
         changes["domain_id"] = int(number_arg(str(args.domain_id), "--domain-id", "N"))
     return dataclasses.replace(ros, **changes)
+
+
+#: How long ``sim-robot --lockstep`` waits each period for the node's command (wall time).
+LOCKSTEP_WAIT_S = 2.0
 
 
 class Stop(threading.Event):
@@ -68,6 +72,12 @@ def cmd_node(args: argparse.Namespace) -> int:
 
     config = load_node_config(args.params)
     config = dataclasses.replace(config, ros=_ros_overrides(config.ros, args))
+    if args.scenario:                  # the parameters of the world sim-robot runs
+        from companion.sim.scenario import load_scenario
+
+        sc = load_scenario(args.scenario)
+        config = dataclasses.replace(config, params=sc.params, controller=sc.controller)
+    config = dataclasses.replace(config, params=with_sensing(config.params, args))
     if args.controller:
         config = dataclasses.replace(config, controller=args.controller)
     limit = duration_arg(args.duration) if args.duration else None
@@ -117,8 +127,9 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
     if args.person_type:
         ros = dataclasses.replace(ros, person_type=args.person_type)
     rate = number_arg(args.rate, "--rate", "X") if args.rate else 1.0
-    if rate != 1.0 and not ros.use_sim_time:
+    if (rate != 1.0 or args.lockstep) and not ros.use_sim_time:
         ros = dataclasses.replace(ros, use_sim_time=True)   # other rates need /clock
+    lockstep = LOCKSTEP_WAIT_S if args.lockstep else 0.0
     wait = number_arg(args.wait, "--wait", "S")
     if args.seed is not None:
         sc = dataclasses.replace(sc, seed=seed_arg(args.seed))
@@ -129,7 +140,7 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
     try:
         with stop_on_signals() as stop:
             pacer = Pacer(rate, stop)
-            epoch = 0.0 if ros.use_sim_time else time.time()
+            epoch = sc.params.dt if ros.use_sim_time else None   # None: the clock at t = 0
             print(f"companion sim-robot: {sc.name}, {sc.duration:g} s at {rate:g}x real time "
                   f"over {ros.transport} (domain {ros.domain_id}); waiting for a node on "
                   f"{ros.topics.cmd_vel}", flush=True)
@@ -137,10 +148,11 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
                 with bag_outputs(bag) as staged:
                     if staged is None:
                         log, robot = run_sim_robot(sc.episode(), transport, ros, pacer,
-                                                   epoch, wait_s=wait)
+                                                   epoch, wait_s=wait, lockstep_s=lockstep)
                     else:
                         log, robot = recording_sim_robot(sc.episode(), transport, ros, pacer,
-                                                         epoch, staged, wait_s=wait)
+                                                         epoch, staged, wait_s=wait,
+                                                         lockstep_s=lockstep)
             except Interrupted:
                 print("companion sim-robot: interrupted; nothing written", flush=True)
                 return stop.code or 130

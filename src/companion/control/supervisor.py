@@ -56,7 +56,7 @@ class SafetySupervisor:
         self.inner.reset()
         self._inner_fresh = False     # inner must be reset before its next step
         self._prev = (0.0, 0.0)       # last output (v, omega)
-        self._started = False         # _prev is known (a step, or applied())
+        self._started = False         # _prev is known (a measured velocity, or applied())
         self._odometry_bad_since: float | None = None       # odometry invalid since
         self._clock.reset()
         self._odometry.reset()
@@ -97,11 +97,11 @@ class SafetySupervisor:
         if not stop and obs.scan is not None:
             stop = "scan_invalid" if scan is None else checks.scan_fault(scan, p, reasons)
         odometry = self._odometry.check(obs.t, obs.robot)   # a fault: missing odometry
-        velocity = self._velocity(obs, reasons, odometry)
+        velocity, measured = self._velocity(obs, reasons, odometry)
         if not stop and self._odometry_bad_since is not None \
                 and self._sensor_t - self._odometry_bad_since > p.supervisor.odometry_timeout_s:
             stop = "odometry_lost"
-        if not self._started:         # the rate limits start from the measured velocity
+        if measured and not self._started:   # rate limits start from the measured velocity
             self._prev, self._started = saturate(*velocity, self.params.robot), True
 
         stepped = False
@@ -165,23 +165,23 @@ class SafetySupervisor:
         return at
 
     def _velocity(self, obs: Observation, reasons: list[str], fault: str
-                  ) -> tuple[float, float]:
-        """The robot's velocity: odometry if the sample is plausible (``fault`` empty: its
-        time advances and its pose does not jump) and its velocity is finite and at most
-        twice the velocity limits, else the last command; an invalid sample is reported and
-        counts as missing (the timeout stops the robot)."""
+                  ) -> tuple[tuple[float, float], bool]:
+        """The robot's velocity and whether it was measured: odometry if the sample is
+        plausible (``fault`` empty: its time advances and its pose does not jump) and its
+        velocity is finite and at most twice the velocity limits, else the last command; an
+        invalid sample is reported and counts as missing (the timeout stops the robot)."""
         v, r = obs.robot_velocity, self.params.robot
         if not fault and v is None:
             self._odometry_bad_since = None
-            return self._prev
+            return self._prev, False
         if not fault and checks.finite(*v) and abs(v[0]) <= 2.0 * r.v_max \
                 and abs(v[1]) <= 2.0 * r.omega_max:
             self._odometry_bad_since = None
-            return v
+            return v, True
         reasons.append(fault or "odometry_invalid")
         if self._odometry_bad_since is None:
             self._odometry_bad_since = self._sensor_t
-        return self._prev
+        return self._prev, False
 
     def _ahead(self, obs: Observation, estimate: PersonEstimate, obstacles: tuple,
                scan: Scan | None, velocity: tuple[float, float]) -> Observation:

@@ -175,11 +175,14 @@ class CompanionNode:
             x, y, th = unicycle_step(odom.pose.x, odom.pose.y, odom.pose.theta,
                                      *odom.velocity, lead)
             robot, velocity = Pose(x, y, wrap_pi(th)), odom.velocity
+        detections = tuple(self._detection(s, samples) for s in people)
+        placed = [d for d in detections if d.frame == self.config.params.tracker.world_frame]
+        if placed:                # the newest detection, until the estimate, hides the person
+            self._seen = (placed[-1].x, placed[-1].y)      # from the LiDAR's obstacles
         if scan is not None:
             self._use_scan(*scan, samples)
         if r.topics.scan and now - self._scan_t > r.scan_timeout_s:
             stale.append("scan")
-        detections = tuple(self._detection(s, samples) for s in people)
         obs = Observation(now, robot, None, self._obstacles, self._scan_seen, velocity,
                           detections, tuple(stale))
         cmd = self.stack.step(obs)
@@ -248,17 +251,22 @@ class CompanionNode:
         if self._markers is not None:
             self._markers(convert.markers_msg(now, r.odom_frame, e, slot, reach))
 
+#: A period is due this much before its time: /clock carries nanoseconds and the schedule
+#: sums ``dt``, so a clock of exactly ``k * dt`` can read a hair before the summed time.
+_CLOCK_SLACK_S = 1e-6
+
+
 def spin(node: CompanionNode, stop: threading.Event, limit_s: float | None = None) -> int:
     """Tick ``node`` every period until ``stop`` is set (or ``limit_s`` s of the node's time
     have passed), then publish a zero velocity; returns the number of ticks."""
     dt, sim = node.config.params.dt, node.config.ros.use_sim_time
     ticks, start, next_t = 0, None, None
     while not stop.is_set():
-        now = node.wait_clock(next_t if next_t is not None else -math.inf, 0.1) if sim \
-            else node.now()
-        if now is None or (next_t is not None and now < next_t):
+        due = -math.inf if next_t is None else next_t - _CLOCK_SLACK_S
+        now = node.wait_clock(due, 0.1) if sim else node.now()
+        if now is None or now < due:
             if not sim:
-                stop.wait(min(next_t - now, dt))
+                stop.wait(min(due - now, dt))
             continue
         start = now if start is None else start
         if limit_s is not None and now - start >= limit_s:

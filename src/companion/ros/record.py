@@ -85,7 +85,9 @@ def record_run(spec: EpisodeSpec, config: NodeConfig, bag_path: Path) -> Log:
 
 
 def recording_sim_robot(spec: EpisodeSpec, transport: Transport, ros: RosParams,
-                        pacer: Pacer, epoch: float, bag_path: Path, wait_s: float = 0.0,
+                        pacer: Pacer, epoch: float | None, bag_path: Path,
+                        wait_s: float = 0.0,
+                        lockstep_s: float = 0.0,
                         after: Callable[[float], None] | None = None
                         ) -> tuple[Log, WireRobot]:
     """:func:`~companion.ros.sim_robot.run_sim_robot` recording what the robot sends and
@@ -110,13 +112,14 @@ def recording_sim_robot(spec: EpisodeSpec, transport: Transport, ros: RosParams,
             odom = rec.last.get(t.odom)
             if odom is None:
                 return
-            person = spec.person.state(k)
-            update = scene.update(epoch + k, convert.odometry_sample(odom).pose, person, None,
-                                  slot_point(person, p), reach)
+            person, sample = spec.person.state(k), convert.odometry_sample(odom)
+            update = scene.update(sample.t, sample.pose, person, None, slot_point(person, p),
+                                  reach)
             if update is not None:
                 rec.record(SCENE_TOPIC, SCENE_TYPE, update)
 
-        return run_sim_robot(spec, rec, ros, pacer, epoch, after=sample_done, wait_s=wait_s)
+        return run_sim_robot(spec, rec, ros, pacer, epoch, after=sample_done, wait_s=wait_s,
+                             lockstep_s=lockstep_s)
     finally:
         bag.close()
 

@@ -6,6 +6,9 @@ person, sensing model, LiDAR, actuator lag, the log), but the controller is on t
 each sample (/odom, /tf odom -> base_link, /scan, /person detections, /clock) and hands the
 plant the last /cmd_vel received. Like ros2_control's diff_drive_controller it brakes to a
 stop at the deceleration limits when no command came for ``robot.command_timeout_s``.
+
+In lock step (``lockstep_s`` > 0, with /clock) each period waits for the node's answer to
+that period's /clock before the plant moves, as an in-process run does; docs/ros.md.
 """
 
 from __future__ import annotations
@@ -55,12 +58,17 @@ class WireRobot:
     takes_detections = True
 
     def __init__(self, transport: Transport, ros: RosParams, params: Params, pacer: Pacer,
-                 epoch: float = 0.0, after: Callable[[float], None] | None = None):
-        """``epoch`` is added to simulated time in stamps (the system clock at the start;
-        0 with ``use_sim_time``); ``after(t)`` runs once the sample's messages are out (a
-        lock-step test ticks the node there)."""
+                 epoch: float | None = 0.0, after: Callable[[float], None] | None = None,
+                 lockstep_s: float = 0.0):
+        """``epoch`` is added to simulated time in stamps (None: the system clock at the first
+        sample, after the wait for a node; with ``use_sim_time`` one period, so that the
+        node's tick on the waiting phase's /clock of 0 is followed by one at every sample);
+        ``after(t)`` runs once the sample's messages are out (a lock-step test ticks the node
+        there); ``lockstep_s`` > 0 waits up to that long (wall time) each period for the
+        node's answer to the period's /clock."""
         self.ros, self.params, self.pacer, self.epoch, self.after = ros, params, pacer, \
             epoch, after
+        self.lockstep_s = lockstep_s if ros.use_sim_time else 0.0
         t = ros.topics
         self._odom = transport.publisher(t.odom, "nav_msgs/msg/Odometry", DEFAULT)
         self._tf = transport.publisher("/tf", "tf2_msgs/msg/TFMessage", Qos(depth=100))
@@ -68,12 +76,14 @@ class WireRobot:
             if t.scan else None
         kind = ros.person_type
         self._person = transport.publisher(t.person, convert.PERSON_TYPES[kind], DEFAULT)
+        # /clock reliable (readers may be best effort): on Zenoh the reliable and the
+        # best-effort samples travel apart, and a clock must not overtake its sample's data
         self._clock = transport.publisher(t.clock, "rosgraph_msgs/msg/Clock",
-                                          Qos(reliable=False, depth=1)) \
+                                          Qos(reliable=True, depth=1)) \
             if ros.use_sim_time else None
         cmd_type = "geometry_msgs/msg/TwistStamped" if ros.cmd_vel_stamped \
             else "geometry_msgs/msg/Twist"
-        self._lock = threading.Lock()
+        self._lock = threading.Condition()
         self._received: tuple[float, float] | None = None
         self.commands = 0
         transport.subscribe(t.cmd_vel, cmd_type, self._on_cmd, DEFAULT)
@@ -85,6 +95,7 @@ class WireRobot:
             with self._lock:
                 self._received = (v, w)
                 self.commands += 1
+                self._lock.notify_all()
 
     def wait_for_node(self, timeout: float) -> bool:
         """Wait up to ``timeout`` s for a first /cmd_vel (with ``use_sim_time``, /clock stays
@@ -92,7 +103,7 @@ class WireRobot:
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             if self._clock is not None:
-                self._clock(convert.clock_msg(self.epoch))
+                self._clock(convert.clock_msg(max(0.0, (self.epoch or 0.0) - self.params.dt)))
             with self._lock:
                 if self.commands:
                     self._received, self.commands = None, 0
@@ -111,10 +122,10 @@ class WireRobot:
 
     def step(self, obs: Observation) -> Command:
         self.pacer.wait(obs.t)
+        if self.epoch is None:
+            self.epoch = time.time() - obs.t
         stamp = self.epoch + obs.t
         r = self.ros
-        if self._clock is not None:
-            self._clock(convert.clock_msg(stamp))
         velocity = obs.robot_velocity or (0.0, 0.0)
         self._odom(convert.odometry_msg(stamp, obs.robot, velocity, r.odom_frame,
                                         r.base_frame))
@@ -136,9 +147,15 @@ class WireRobot:
             else:
                 for p in people:
                     self._person(convert.person_msg([p], r.person_type, p.t, p.frame))
+        if self._clock is not None:        # last: a node on /clock ticks with the sample in
+            self._clock(convert.clock_msg(stamp))
         if self.after is not None:
             self.after(obs.t)
         with self._lock:
+            if self.lockstep_s > 0.0:      # period k's answer is command k + 1 (so a late
+                due = round(obs.t / self.params.dt) + 1     # answer is not the next one's)
+                self._lock.wait_for(lambda: self.commands >= due or self.pacer.stop.is_set(),
+                                    self.lockstep_s)
             received, self._received = self._received, None
         if received is not None:
             self._base, self._last_cmd_t = received, obs.t
@@ -148,16 +165,18 @@ class WireRobot:
 
 
 def run_sim_robot(spec: EpisodeSpec, transport: Transport, ros: RosParams, pacer: Pacer,
-                  epoch: float = 0.0, after: Callable[[float], None] | None = None,
-                  wait_s: float = 0.0) -> tuple[Log, WireRobot]:
+                  epoch: float | None = 0.0, after: Callable[[float], None] | None = None,
+                  wait_s: float = 0.0, lockstep_s: float = 0.0) -> tuple[Log, WireRobot]:
     """Run ``spec`` with its controller on the wire, after waiting up to ``wait_s`` s for a
-    node's first command; the robot senses with a LiDAR (a ROS robot publishes /scan).
-    Returns the log and the robot (its count of commands received during the run)."""
-    robot = WireRobot(transport, ros, spec.params, pacer, epoch, after)
+    node's first command; the robot senses with a LiDAR (a ROS robot publishes /scan) and
+    starts as ``companion run`` starts it (in the slot at the walking speed unless the
+    scenario says otherwise). Returns the log and the robot (its count of commands received
+    during the run)."""
+    robot = WireRobot(transport, ros, spec.params, pacer, epoch, after, lockstep_s)
     if wait_s > 0.0:
         robot.wait_for_node(wait_s)
     log = run_episode(robot, spec.person, spec.params, spec.duration, start=spec.start,
                       seed=spec.seed, obstacles=spec.obstacles,
                       perception=LidarPerception(spec.params), faults=spec.faults,
-                      start_velocity=spec.start_velocity or (0.0, 0.0))
+                      start_velocity=spec.start_velocity)
     return log, robot
