@@ -183,3 +183,56 @@ def test_stamps_round_trip_to_the_nanosecond():
     for t in (0.0, 1.5, 1_764_000_000.123456789, 0.999_999_999_6):
         assert convert.seconds(convert.time_msg(t)) == pytest.approx(t, abs=1e-9)
         assert 0 <= convert.time_msg(t).nanosec < 1_000_000_000
+
+
+def test_odometry_and_scans_from_the_future_are_dropped_with_a_reason():
+    """Stamped later than the node's time plus tracker.future_tolerance_s (a clock ahead, a
+    corrupt stamp): odometry_future, scan_future; a scan from the future does not hide that
+    the scans stopped."""
+    bus, transport = graph()
+    node = CompanionNode(config_from_mapping({"ros": {"scan_timeout_s": 0.3}}), transport())
+    pub = transport()
+    send_odom = pub.publisher("/odom", "nav_msgs/msg/Odometry")
+    send_scan = pub.publisher("/scan", "sensor_msgs/msg/LaserScan")
+    send_person = pub.publisher("/person", "geometry_msgs/msg/PointStamped")
+    empty = Scan(np.linspace(-1.5, 1.5, 61), np.full(61, np.inf), 0.0, 0.0, 0.0, 0.05, 10.0)
+    cmds = []
+    for k in range(30):
+        t = 5.0 + 0.05 * k
+        send_odom(odom(t, 0.0, 0.0, 0.0))
+        if k == 12:
+            send_odom(odom(t + 5.0, 0.0, 0.0, 0.0))
+        send_person(person(t, 0.0, 1.0))
+        if k < 10:
+            send_scan(convert.scan_msg(t, empty, "laser", 0.1))
+        if k == 10:
+            send_scan(convert.scan_msg(t + 5.0, empty, "laser", 0.1))
+        cmds.append(node.tick(t))
+    assert "scan_future" in cmds[10].reason.split("+") and cmds[10].status != "ok"
+    assert "odometry_future" in cmds[12].reason.split("+") and cmds[12].status != "ok"
+    assert "odometry_future" not in cmds[13].reason
+    assert "scan_stale" not in cmds[9].reason
+    assert all("scan_stale" in c.reason for c in cmds[17:])   # 0.3 s after the scan at 5.45
+    assert statuses(bus)[10].message == cmds[10].reason
+
+
+def test_a_node_that_ticked_before_any_odometry_starts_from_the_robots_velocity():
+    """A robot already moving when the node starts (the lock-step robot's wait at /clock 0):
+    the rate limits start from the first odometry's velocity, not from the zero the node
+    sent before it had any, so the commands equal those of a node that waited."""
+    def run(tick_at_zero: bool) -> list[tuple[float, float]]:
+        bus, node, send_odom, send_person = node_on_bus()
+        if tick_at_zero:
+            assert node.tick(0.0).reason.startswith("odometry_stale")
+        out = []
+        for k in range(1, 21):
+            t = 0.05 * k
+            send_odom(odom(t, 1.0 * t, 0.0, 0.0, 1.0))
+            send_person(person(t, 1.0 * t + 0.2, 1.0))
+            cmd = node.tick(t)
+            out.append((cmd.v, cmd.omega))
+        return out
+
+    waited, early = run(False), run(True)
+    assert early[0][0] > 0.8                  # not a ramp from 0 at the acceleration limit
+    assert early == waited

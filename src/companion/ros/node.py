@@ -12,6 +12,7 @@ older than ``ros.odom_timeout_s`` or no scan for ``ros.scan_timeout_s`` stops th
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
@@ -21,7 +22,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from companion.control import make_controller
+from companion.control import checks, make_controller
 from companion.control.avoidance import influence_range
 from companion.control.slot import slot_point
 from companion.geometry import unicycle_step, wrap_pi
@@ -53,6 +54,12 @@ class View(NamedTuple):
     estimate: PersonEstimate | None
     slot: tuple[float, float] | None
     obstacles: tuple[tuple[Circle, float], ...]
+
+
+def with_reasons(cmd: Command, reasons: list[str]) -> Command:
+    """``cmd`` with the node's own ``reasons`` added (degraded if it was ok)."""
+    return dataclasses.replace(cmd, status="degraded" if cmd.status == "ok" else cmd.status,
+                               reason="+".join([cmd.reason] * bool(cmd.reason) + reasons))
 
 
 def pose_at(samples: deque[OdometrySample], t: float) -> Pose | None:
@@ -95,6 +102,7 @@ class CompanionNode:
         self._sim_time: float | None = None
         self._seen: tuple[float, float] | None = None
         self.last: Command | None = None
+        self._measured = False                  # a first odometry velocity was applied
         self.view: View | None = None
         t = r.topics
         reliable = Qos(depth=r.history_depth)
@@ -161,10 +169,14 @@ class CompanionNode:
         """One period at time ``now``: the observation, the stack's command, the outputs."""
         r = self.config.ros
         with self._lock:
+            future = self._drop_future(now)
             odom = self._odom[-1] if self._odom else None
             people, self._people = self._people, []
             scan, self._scan = self._scan, None
             samples = deque(self._odom)
+        if odom is not None and not self._measured and checks.finite(*odom.velocity):
+            self._measured = True           # the rate limits start from the robot's velocity
+            self.stack.applied(Command(*odom.velocity))
         stale = []
         if odom is None or now - odom.t > r.odom_timeout_s:
             stale.append("odometry")
@@ -186,6 +198,8 @@ class CompanionNode:
         obs = Observation(now, robot, None, self._obstacles, self._scan_seen, velocity,
                           detections, tuple(stale))
         cmd = self.stack.step(obs)
+        if future:
+            cmd = with_reasons(cmd, future)
         self.last = cmd
         if cmd.estimate is not None:
             self._seen = (cmd.estimate.state.x, cmd.estimate.state.y)
@@ -198,6 +212,19 @@ class CompanionNode:
         self._cmd(convert.twist_msg(0.0, 0.0, r.cmd_vel_stamped, now, r.base_frame))
 
     # -- the pieces ----------------------------------------------------------------------
+
+    def _drop_future(self, now: float) -> list[str]:
+        """Drop odometry and the scan stamped later than ``now`` plus the tracker's
+        ``future_tolerance_s`` (a clock ahead, a corrupt stamp); the reasons. Under the lock."""
+        ahead, reasons = now + self.config.params.tracker.future_tolerance_s, []
+        if self._odom and self._odom[-1].t > ahead:
+            reasons.append("odometry_future")
+            while self._odom and self._odom[-1].t > ahead:
+                self._odom.pop()
+        if self._scan is not None and self._scan[0] > ahead:
+            reasons.append("scan_future")
+            self._scan = None
+        return reasons
 
     def _use_scan(self, t: float, msg: Any, samples: deque[OdometrySample]) -> None:
         """A new scan: placed with the odometry pose at its stamp and the LiDAR's mounting
