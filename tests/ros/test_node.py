@@ -236,3 +236,25 @@ def test_a_node_that_ticked_before_any_odometry_starts_from_the_robots_velocity(
     waited, early = run(False), run(True)
     assert early[0][0] > 0.8                  # not a ramp from 0 at the acceleration limit
     assert early == waited
+
+
+def test_spin_ticks_on_every_clock_of_k_dt():
+    """With ``use_sim_time``, ``spin`` ticks at each /clock of exactly k * dt (in nanoseconds)
+    although its schedule sums dt and reads a hair later from k = 15 at 20 Hz: lock step
+    (sim-robot --lockstep) needs an answer to every period."""
+    bus, store = MemoryBus(), typestore()
+    node = CompanionNode(config_from_mapping({"ros": {"use_sim_time": True}}),
+                         MemoryTransport(bus, store))
+    clock = MemoryTransport(bus, store).publisher("/clock", "rosgraph_msgs/msg/Clock")
+    ticks = threading.Semaphore(0)
+    bus.subscribers["/cmd_vel"].append(("geometry_msgs/msg/Twist", lambda _: ticks.release()))
+    stop = threading.Event()
+    thread = threading.Thread(target=spin, args=(node, stop), daemon=True)
+    thread.start()
+    try:
+        for k in range(40):
+            clock(convert.clock_msg(k * node.config.params.dt))
+            assert ticks.acquire(timeout=60.0 if k == 0 else 5.0), f"no tick at k = {k}"
+    finally:
+        stop.set()
+        thread.join(timeout=5.0)

@@ -11,7 +11,6 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -20,11 +19,7 @@ from ros_helpers import needs_rclpy
 
 from companion import metrics
 from companion.model import relative_state, slot_reference
-from companion.ros import convert
-from companion.ros.messages import typestore
-from companion.ros.node import CompanionNode, spin
-from companion.ros.settings import config_from_mapping, load_node_config
-from companion.ros.transport import MemoryBus, MemoryTransport
+from companion.ros.settings import load_node_config
 from companion.sim.episode import start_in_slot
 from companion.sim.runner import run_one
 from companion.sim.scenario import load_scenario
@@ -33,37 +28,6 @@ from companion.types import Log
 ROBOT = Path(__file__).with_name("rclpy_robot.py")
 CLI = [sys.executable, "-m", "companion.apps.cli"]
 pytestmark = needs_rclpy
-
-
-def spin_ticks_on_every_clock(periods: int = 40) -> bool:
-    """Whether ``spin`` with ``use_sim_time`` ticks at each /clock of exactly k * dt (in
-    nanoseconds), as lock step needs: before the lead's clock-tolerance fix of ``spin`` it
-    misses the ones that read a hair before its summed schedule (from k = 15 at 20 Hz)."""
-    bus, store = MemoryBus(), typestore()
-    node = CompanionNode(config_from_mapping({"ros": {"use_sim_time": True}}),
-                         MemoryTransport(bus, store))
-    clock = MemoryTransport(bus, store).publisher("/clock", "rosgraph_msgs/msg/Clock")
-    ticks = threading.Semaphore(0)
-    bus.subscribers["/cmd_vel"].append(("geometry_msgs/msg/Twist", lambda _: ticks.release()))
-    stop = threading.Event()
-    thread = threading.Thread(target=spin, args=(node, stop), daemon=True)
-    thread.start()
-    try:
-        for k in range(periods):
-            clock(convert.clock_msg(k * node.config.params.dt))
-            if not ticks.acquire(timeout=60.0 if k == 0 else 2.0):
-                return False
-        return True
-    finally:
-        stop.set()
-        thread.join(timeout=5.0)
-
-
-@pytest.fixture(scope="module", autouse=True)
-def lock_step():
-    if not spin_ticks_on_every_clock():
-        pytest.skip("companion.ros.node.spin misses a /clock of exactly k * dt (the "
-                    "clock-tolerance fix of spin is not in this tree)")
 
 
 def figure8(duration: float):

@@ -22,7 +22,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from companion.control import checks, make_controller
+from companion.control import make_controller
 from companion.control.avoidance import influence_range
 from companion.control.slot import slot_point
 from companion.geometry import unicycle_step, wrap_pi
@@ -102,7 +102,6 @@ class CompanionNode:
         self._sim_time: float | None = None
         self._seen: tuple[float, float] | None = None
         self.last: Command | None = None
-        self._measured = False                  # a first odometry velocity was applied
         self.view: View | None = None
         t = r.topics
         reliable = Qos(depth=r.history_depth)
@@ -174,9 +173,6 @@ class CompanionNode:
             people, self._people = self._people, []
             scan, self._scan = self._scan, None
             samples = deque(self._odom)
-        if odom is not None and not self._measured and checks.finite(*odom.velocity):
-            self._measured = True           # the rate limits start from the robot's velocity
-            self.stack.applied(Command(*odom.velocity))
         stale = []
         if odom is None or now - odom.t > r.odom_timeout_s:
             stale.append("odometry")
