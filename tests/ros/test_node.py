@@ -258,3 +258,26 @@ def test_spin_ticks_on_every_clock_of_k_dt():
     finally:
         stop.set()
         thread.join(timeout=5.0)
+
+
+def test_sim_robot_logs_the_node_status_and_its_command_timeout():
+    """sim-robot's log carries the node's /companion/status; when the node falls silent (it
+    stops ticking at 2 s) the robot keeps the last command for robot.command_timeout_s, then
+    brakes at the deceleration limits to a stop, logged as stopped: command_timeout."""
+    sc = load_scenario("figure8", {"sensing": "ideal"})
+    bus, transport = graph()
+    cfg = config_from_mapping({"ros": {"use_sim_time": True, "person_type": "odometry"}})
+    cfg = dataclasses.replace(cfg, params=sc.params, controller=sc.controller)
+    node = CompanionNode(cfg, transport())
+    spec = dataclasses.replace(sc.episode(), duration=4.0)
+    log, _ = run_sim_robot(spec, transport(), cfg.ros, Pacer(0.0),
+                           after=lambda t: node.tick(t) if t < 2.0 - 1e-9 else None)
+    p, t = sc.params, log["t"]
+    talking = t < 2.0 - 1e-9
+    assert set(log["status"][talking]) == {"ok"}
+    held = (t >= 2.0 - 1e-9) & (t < 2.0 + p.robot.command_timeout_s - p.dt - 1e-9)
+    assert np.all(log["v"][held] == log["v"][talking][-1])
+    braking = t >= 2.0 + p.robot.command_timeout_s - p.dt - 1e-9
+    assert set(log["reason"][braking]) == {"command_timeout"}
+    dv = -np.diff(log["v"][braking])
+    assert np.all(dv <= p.supervisor.decel_max * p.dt + 1e-12) and log["v"][-1] == 0.0

@@ -224,6 +224,19 @@ def status_msg(t: float, cmd: Command, errors: tuple[float, float, float] | None
     return make("diagnostic_msgs/msg/DiagnosticArray", header=header(t, ""), status=[status])
 
 
+def status_of(msg: Any) -> tuple[str, str]:
+    """``(status, reason)`` of a DiagnosticArray from :func:`status_msg` (a robot logging what
+    the node said); another node's array gives its first status' level and message."""
+    if not msg.status:
+        return "ok", ""
+    first = msg.status[0]
+    values = {kv.key: kv.value for kv in first.values}
+    names = {level: name for name, level in LEVELS.items()}
+    status = values.get("status", names.get(int(first.level), "degraded"))
+    reason = values.get("reason", "" if status == "ok" else first.message)
+    return (status, reason) if status in LEVELS else ("degraded", reason)
+
+
 _COLORS = {"person": (0.1, 0.4, 1.0, 0.9), "slot": (0.1, 0.8, 0.2, 0.8),
            "obstacle": (0.9, 0.2, 0.1, 0.9), "influence": (0.9, 0.6, 0.1, 0.25)}
 

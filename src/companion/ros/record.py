@@ -99,10 +99,8 @@ def recording_sim_robot(spec: EpisodeSpec, transport: Transport, ros: RosParams,
     try:
         rec = RecordingTransport(transport, bag)
         t = ros.topics
-        for topic, msgtype in ((t.status, "diagnostic_msgs/msg/DiagnosticArray"),
-                               (t.markers, "visualization_msgs/msg/MarkerArray")):
-            if topic:
-                rec.subscribe(topic, msgtype, lambda msg: None)
+        if t.markers:                   # (the robot itself listens to the status)
+            rec.subscribe(t.markers, "visualization_msgs/msg/MarkerArray", lambda msg: None)
         scene = Scene(ros.odom_frame, p.robot.radius)
         reach = tuple((ob, influence_range(ob, p.avoidance)) for ob in spec.obstacles)
 

@@ -5,7 +5,9 @@ person, sensing model, LiDAR, actuator lag, the log), but the controller is on t
 :class:`WireRobot` stands in the controller's place, publishes what the robot senses at
 each sample (/odom, /tf odom -> base_link, /scan, /person detections, /clock) and hands the
 plant the last /cmd_vel received. Like ros2_control's diff_drive_controller it brakes to a
-stop at the deceleration limits when no command came for ``robot.command_timeout_s``.
+stop at the deceleration limits when no command came for ``robot.command_timeout_s``
+(status ``stopped``, reason ``command_timeout`` in the log; otherwise the log carries the
+node's last /companion/status).
 
 In lock step (``lockstep_s`` > 0, with /clock) each period waits for the node's answer to
 that period's /clock before the plant moves, as an in-process run does; docs/ros.md.
@@ -85,8 +87,12 @@ class WireRobot:
             else "geometry_msgs/msg/Twist"
         self._lock = threading.Condition()
         self._received: tuple[float, float] | None = None
+        self._status = ("ok", "")        # the node's last word on /companion/status
         self.commands = 0
         transport.subscribe(t.cmd_vel, cmd_type, self._on_cmd, DEFAULT)
+        if t.status:
+            transport.subscribe(t.status, "diagnostic_msgs/msg/DiagnosticArray",
+                                self._on_status, DEFAULT)
         self.reset()
 
     def _on_cmd(self, msg: Any) -> None:
@@ -96,6 +102,11 @@ class WireRobot:
                 self._received = (v, w)
                 self.commands += 1
                 self._lock.notify_all()
+
+    def _on_status(self, msg: Any) -> None:
+        status = convert.status_of(msg)
+        with self._lock:
+            self._status = status
 
     def wait_for_node(self, timeout: float) -> bool:
         """Wait up to ``timeout`` s for a first /cmd_vel (with ``use_sim_time``, /clock stays
@@ -157,11 +168,13 @@ class WireRobot:
                 self._lock.wait_for(lambda: self.commands >= due or self.pacer.stop.is_set(),
                                     self.lockstep_s)
             received, self._received = self._received, None
+            status = self._status
         if received is not None:
             self._base, self._last_cmd_t = received, obs.t
         elif obs.t - self._last_cmd_t >= self.params.robot.command_timeout_s - 1e-9:
             self._base = timed_out(self._base, self.params)
-        return Command(*self._base)
+            status = ("stopped", "command_timeout")
+        return Command(*self._base, 0.0, *status)
 
 
 def run_sim_robot(spec: EpisodeSpec, transport: Transport, ros: RosParams, pacer: Pacer,
