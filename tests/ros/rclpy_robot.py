@@ -3,7 +3,7 @@ tests, run as a bounded subprocess: ``python rclpy_robot.py PLAN.json``.
 
 It is a third-party ROS 2 robot, so it imports nothing of companion: an ideal unicycle (the
 exact arc of each period, no actuator lag) with ros2_control's 0.5 s command timeout, driven
-in lock step with a node on ``use_sim_time`` (docs/ros.md):
+in lock step with a node on ``use_sim_time`` (docs/ros2.md):
 
 1. wait until the graph shows the node's endpoints, then publish /clock = 0 every 50 ms until
    a first /cmd_vel arrives;

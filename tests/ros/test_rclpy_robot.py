@@ -1,5 +1,5 @@
 """`companion node` closing the loop with a robot written in rclpy (Jazzy, rmw_fastrtps_cpp;
-tests/ros/rclpy_robot.py) over DDS on loopback, in lock step on /clock (docs/ros.md): the
+tests/ros/rclpy_robot.py) over DDS on loopback, in lock step on /clock (docs/ros2.md): the
 figure-8 of `companion run figure8 --sensing ideal`, and malformed or out-of-order messages
 from the rclpy side."""
 

@@ -82,6 +82,6 @@ def test_docs_list_every_node_parameter():
     from companion.config import field_docs
     from companion.ros.settings import RosParams
 
-    text = (Path(__file__).parents[2] / "docs" / "ros.md").read_text()
+    text = (Path(__file__).parents[2] / "docs" / "ros2.md").read_text()
     missing = [k for k, *_ in field_docs(RosParams) if f"`ros.{k}`" not in text]
     assert not missing

@@ -202,7 +202,7 @@ def _transport(p: argparse.ArgumentParser) -> None:
 
 def _ros_commands(sub) -> None:
     nd = sub.add_parser("node", help="the controller as a ROS 2 node: /odom, /scan, /person in, "
-                        "/cmd_vel out (docs/ros.md)")
+                        "/cmd_vel out (docs/ros2.md)")
     nd.add_argument("--params", metavar="FILE", help="ROS 2 parameters YAML "
                     "(companion: ros__parameters: ...)")
     nd.add_argument("--scenario", metavar="NAME", help="take the controller and the "
@@ -222,7 +222,7 @@ def _ros_commands(sub) -> None:
     nd.set_defaults(func="rosapps.cmd_node")
 
     sr = sub.add_parser("sim-robot", help="the simulator as a ROS 2 robot: /odom, /scan, "
-                        "/person, /tf, /clock out, /cmd_vel in (docs/ros.md)")
+                        "/person, /tf, /clock out, /cmd_vel in (docs/ros2.md)")
     sr.add_argument("scenario", help="built-in scenario name or a TOML file")
     sr.add_argument("--ros-params", metavar="FILE", help="ROS 2 parameters YAML (its ros "
                     "section: topics, frames, transport)")

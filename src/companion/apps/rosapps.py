@@ -1,5 +1,5 @@
 """``companion node``, ``companion sim-robot`` and ``companion replay``: the ROS 2 commands
-(docs/ros.md, docs/recording.md); ``--bag`` of these and of ``companion run``."""
+(docs/ros2.md, docs/recording.md); ``--bag`` of these and of ``companion run``."""
 
 from __future__ import annotations
 

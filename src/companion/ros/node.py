@@ -7,7 +7,7 @@ what arrived into one :class:`~companion.types.Observation` and publishes the co
 status and the markers. Header stamps, not arrival times, place every input in time: a
 detection or scan is placed with the odometry pose at its stamp (interpolated), and odometry
 older than ``ros.odom_timeout_s`` or no scan for ``ros.scan_timeout_s`` stops the robot
-(reasons ``odometry_stale``, ``scan_stale``) until fresh data return. docs/ros.md.
+(reasons ``odometry_stale``, ``scan_stale``) until fresh data return. docs/ros2.md.
 """
 
 from __future__ import annotations

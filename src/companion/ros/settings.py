@@ -88,7 +88,7 @@ class Topics(Validated):
 
 @dataclasses.dataclass(frozen=True)
 class RosParams(Validated):
-    """How the node meets the ROS 2 graph (docs/ros.md)."""
+    """How the node meets the ROS 2 graph (docs/ros2.md)."""
 
     node_name: str = param("companion", "", "the node's name", _node_name)
     namespace: str = param("/", "", "the node's namespace", _namespace)
@@ -100,7 +100,7 @@ class RosParams(Validated):
                                "zenohd router of rmw_zenoh)", endpoint_problem)
     use_sim_time: bool = param(False, "", "take time from /clock instead of the system clock")
     person_type: str = param("point", "", "type of the person topic: PointStamped, PoseStamped, "
-                             "PoseArray or Odometry (docs/ros.md)", choices=tuple(PERSON_TYPES))
+                             "PoseArray or Odometry (docs/ros2.md)", choices=tuple(PERSON_TYPES))
     cmd_vel_stamped: bool = param(False, "", "publish TwistStamped instead of Twist")
     odom_frame: str = param("odom", "", "frame of the odometry pose and of world-frame "
                             "detections")

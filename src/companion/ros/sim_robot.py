@@ -10,7 +10,7 @@ stop at the deceleration limits when no command came for ``robot.command_timeout
 node's last /companion/status).
 
 In lock step (``lockstep_s`` > 0, with /clock) each period waits for the node's answer to
-that period's /clock before the plant moves, as an in-process run does; docs/ros.md.
+that period's /clock before the plant moves, as an in-process run does; docs/ros2.md.
 """
 
 from __future__ import annotations
