@@ -141,13 +141,14 @@ def test_robot_stops_by_its_command_timeout_when_the_node_is_killed(tmp_path, ro
                                                                    transport):
     """The node is killed (SIGKILL: no zero velocity) once the test has heard 2.5 s of
     odometry in a figure-8 run of sim-robot (6 s; 10 s over Zenoh, where the listener
-    joins the robot's router a few seconds late). In sim-robot's log.csv, the command the robot executes (``v``, ``omega``) is
-    the last command it received, one of the last the node sent (a listener in the test
-    heard them), held for exactly ``robot.command_timeout_s`` (0.5 s) from the period the
-    robot applied it (at most one period, 0.05 s, after it arrived: so braking starts within
-    0.55 s of the arrival), then brought to zero at ``supervisor.decel_max`` and
-    ``angular_accel_max`` every period, and zero to the end; the base (``robot_v``,
-    ``robot_omega``, no actuator lag with ideal sensing) with it."""
+    joins the robot's router a few seconds late). In sim-robot's log.csv, the command the
+    robot executes (``v``, ``omega``) is the last command it received, one of the last the
+    node sent (a listener in the test heard them), held for exactly
+    ``robot.command_timeout_s`` (0.5 s) from the period the robot applied it (at most one
+    period, 0.05 s, after it arrived: so braking starts within 0.55 s of the arrival), then
+    brought to zero at ``supervisor.decel_max`` and ``angular_accel_max`` every period, and
+    zero to the end; the base (``robot_v``, ``robot_omega``, no actuator lag with ideal
+    sensing) with it."""
     from companion.ros.wire import open_transport
 
     flags, ros = transport_flags(transport, ros_domain)

@@ -212,9 +212,14 @@ class Driver:
         before = self.received()
         sent = self.publish(t, robot, velocity, people)
         self._clock(convert.clock_msg(t + CLOCK_NUDGE_S))
-        if not self.wait_commands(before + 1, timeout):
+        got = self.command_after(before, timeout)
+        return None if got is None else (got[0] - sent, got[1], got[2])
+
+    def command_after(self, count: int, timeout: float) -> tuple[float, float, float] | None:
+        """The command that arrives after the first ``count`` (``(arrived, v, omega)``),
+        waiting up to ``timeout`` s for it; None if it did not come."""
+        if not self.wait_commands(count + 1, timeout):
             return None
         with self._cond:
-            arrived, v, w = self.commands[before]
-        return arrived - sent, v, w
+            return self.commands[count]
 
