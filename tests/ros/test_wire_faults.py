@@ -28,10 +28,9 @@ DT = P.dt
 def transport_flags(transport: str, domain: int) -> tuple[list[str], dict]:
     """CLI flags and ``ros`` parameters of one transport on loopback (Zenoh: a fresh port)."""
     ros = {"transport": transport, "domain_id": domain}
-    if transport == "zenoh":
-        ros["zenoh_connect"] = f"tcp/127.0.0.1:{free_port()}"
     flags = ["--transport", transport, "--domain-id", str(domain)]
     if transport == "zenoh":
+        ros["zenoh_connect"] = f"tcp/127.0.0.1:{free_port()}"
         flags += ["--zenoh-connect", ros["zenoh_connect"]]
     return flags, ros
 
