@@ -136,7 +136,7 @@ def last_hold_and_brake(cmd: list[tuple[float, float]]) -> tuple[int, int]:
     return c, j + 1
 
 
-@pytest.mark.parametrize("transport", ["dds", "zenoh"])
+@pytest.mark.parametrize("transport", ["dds", pytest.param("zenoh", marks=pytest.mark.slow)])
 def test_robot_stops_by_its_command_timeout_when_the_node_is_killed(tmp_path, ros_domain,
                                                                    transport):
     """The node is killed (SIGKILL: no zero velocity) once the test has heard 2.5 s of

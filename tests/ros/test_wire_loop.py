@@ -146,7 +146,7 @@ def test_lockstep_ideal_matches_the_in_process_run(tmp_path, ros_domain, transpo
         assert abs(m["rmse_rho_m"] - ref) < 0.002, (m["rmse_rho_m"], ref)
 
 
-@pytest.mark.parametrize("transport", ["dds", "zenoh"])
+@pytest.mark.parametrize("transport", ["dds", pytest.param("zenoh", marks=pytest.mark.slow)])
 def test_lockstep_realistic_is_within_the_in_process_spread(tmp_path, ros_domain, transport):
     """Realistic sensing with position-only detections (PointStamped, what a leg or camera
     detector sends): RMSE rho within the spread of ten in-process runs (seeds 0-9), which see

@@ -33,10 +33,6 @@ from companion.types import PersonDetection, Pose
 CLI = [sys.executable, "-m", "companion.apps.cli"]
 TWIST = "geometry_msgs/msg/Twist"
 STATUS = "diagnostic_msgs/msg/DiagnosticArray"
-#: The node's ``spin`` compares /clock with its schedule t0 + k*dt summed in floats, which can
-#: lie a few ulp above the exact k*dt of the stamp; /clock is sent this much later so that the
-#: node ticks at every period whatever the rounding (odometry and detections keep k*dt).
-CLOCK_NUDGE_S = 1e-6
 
 
 def free_port() -> int:
@@ -211,7 +207,7 @@ class Driver:
         latency from publishing the people to the command's arrival (s), or None."""
         before = self.received()
         sent = self.publish(t, robot, velocity, people)
-        self._clock(convert.clock_msg(t + CLOCK_NUDGE_S))
+        self._clock(convert.clock_msg(t))
         got = self.command_after(before, timeout)
         return None if got is None else (got[0] - sent, got[1], got[2])
 
