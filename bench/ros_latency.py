@@ -10,7 +10,7 @@ before the detection is published and the moment the next /cmd_vel arrives: publ
 wire hops, the node's period, receive. An upper bound on arrival -> /cmd_vel. Modes:
 
 * ``lockstep``: the node with ``use_sim_time``; /clock is published right after the
-  detection, so the node ticks as the data arrive (the lock-step contract, docs/ros.md).
+  detection, so the node ticks as the data arrive (the lock-step contract, docs/ros2.md).
 * ``timer``: the node on its own 20 Hz wall-clock timer; detections are published at a
   random phase of its period, so a detection waits for the next tick (half a period on
   average).

@@ -1,4 +1,4 @@
-"""Faults across processes on loopback (docs/ros.md): the node killed, the robot killed, and a
+"""Faults across processes on loopback (docs/ros2.md): the node killed, the robot killed, and a
 second person in the detections. ``companion node`` and ``companion sim-robot`` run as
 subprocesses bounded in time; the test process listens (or drives the robot) with companion's
 own transports."""

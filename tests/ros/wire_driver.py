@@ -5,7 +5,7 @@ node`` / ``companion sim-robot`` as bounded subprocesses on loopback.
 (a geometry_msgs/PoseArray in the odometry frame) and, in lock step (the node with
 ``ros.use_sim_time``), /clock last; it records every /cmd_vel and /companion/status it gets
 back with the arrival time on its own monotonic clock. :meth:`Driver.lockstep` follows the
-lock-step contract of docs/ros.md: /clock = 0 every 50 ms until a first /cmd_vel, then per
+lock-step contract of docs/ros2.md: /clock = 0 every 50 ms until a first /cmd_vel, then per
 period the inputs, /clock, and a bounded wait for the command.
 """
 
