@@ -36,3 +36,14 @@ def rclpy_env(tmp_path_factory, ros_domain) -> dict:
                RMW_IMPLEMENTATION="rmw_fastrtps_cpp", FASTDDS_DEFAULT_PROFILES_FILE=str(profile),
                FASTRTPS_DEFAULT_PROFILES_FILE=str(profile))
     return env
+
+
+@pytest.fixture(scope="session", autouse=True)
+def kernels_cached():
+    """Compile (or load) the stack's kernels under the cache's lock before any test starts a
+    node or sim-robot process: on a cold cache this process would otherwise compile a kernel
+    lazily, outside the lock, while a child loads it, and numba can then fail ("no compiled
+    object yet")."""
+    from companion.sim.runner import warm_up
+
+    warm_up()
