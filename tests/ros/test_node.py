@@ -27,15 +27,18 @@ def graph():
     return bus, (lambda: MemoryTransport(bus, typestore()))
 
 
-def lockstep(sensing: str, person_type: str, duration: float, scenario: str = "figure8"):
-    """sim-robot and node on one bus, the node ticked right after each sample's messages."""
+def lockstep(sensing: str, person_type: str, duration: float, scenario: str = "figure8",
+             silent_from: float = math.inf):
+    """sim-robot and node on one bus, the node ticked right after each sample's messages
+    (until ``silent_from`` s)."""
     sc = load_scenario(scenario, {"sensing": sensing})
     bus, transport = graph()
     cfg = config_from_mapping({"ros": {"use_sim_time": True, "person_type": person_type}})
     cfg = dataclasses.replace(cfg, params=sc.params, controller=sc.controller)
     node = CompanionNode(cfg, transport())
     spec = dataclasses.replace(sc.episode(), duration=duration)
-    log, robot = run_sim_robot(spec, transport(), cfg.ros, Pacer(0.0), after=node.tick)
+    log, robot = run_sim_robot(spec, transport(), cfg.ros, Pacer(0.0),
+                               after=lambda t: node.tick(t) if t < silent_from - 1e-9 else None)
     return spec, log, robot, bus
 
 
@@ -106,13 +109,18 @@ def test_stale_odometry_stops_the_robot_and_fresh_odometry_resumes():
     assert "odometry_stale" not in cmd.reason and cmd.status != "stopped"
 
 
-def test_no_scan_for_longer_than_its_timeout_stops_the_robot():
+def scan_rig():
+    """A node with a 0.3 s scan timeout, publishers of /odom, /scan and /person, the bus."""
     bus, transport = graph()
     node = CompanionNode(config_from_mapping({"ros": {"scan_timeout_s": 0.3}}), transport())
     pub = transport()
-    send_odom = pub.publisher("/odom", "nav_msgs/msg/Odometry")
-    send_scan = pub.publisher("/scan", "sensor_msgs/msg/LaserScan")
-    send_person = pub.publisher("/person", "geometry_msgs/msg/PointStamped")
+    return (node, pub.publisher("/odom", "nav_msgs/msg/Odometry"),
+            pub.publisher("/scan", "sensor_msgs/msg/LaserScan"),
+            pub.publisher("/person", "geometry_msgs/msg/PointStamped"), bus)
+
+
+def test_no_scan_for_longer_than_its_timeout_stops_the_robot():
+    node, send_odom, send_scan, send_person, bus = scan_rig()
     scan = convert.scan_msg
 
     empty = Scan(np.linspace(-1.5, 1.5, 61), np.full(61, np.inf), 0.0, 0.0, 0.0, 0.05, 10.0)
@@ -189,12 +197,7 @@ def test_odometry_and_scans_from_the_future_are_dropped_with_a_reason():
     """Stamped later than the node's time plus tracker.future_tolerance_s (a clock ahead, a
     corrupt stamp): odometry_future, scan_future; a scan from the future does not hide that
     the scans stopped."""
-    bus, transport = graph()
-    node = CompanionNode(config_from_mapping({"ros": {"scan_timeout_s": 0.3}}), transport())
-    pub = transport()
-    send_odom = pub.publisher("/odom", "nav_msgs/msg/Odometry")
-    send_scan = pub.publisher("/scan", "sensor_msgs/msg/LaserScan")
-    send_person = pub.publisher("/person", "geometry_msgs/msg/PointStamped")
+    node, send_odom, send_scan, send_person, bus = scan_rig()
     empty = Scan(np.linspace(-1.5, 1.5, 61), np.full(61, np.inf), 0.0, 0.0, 0.0, 0.05, 10.0)
     cmds = []
     for k in range(30):
@@ -264,15 +267,8 @@ def test_sim_robot_logs_the_node_status_and_its_command_timeout():
     """sim-robot's log carries the node's /companion/status; when the node falls silent (it
     stops ticking at 2 s) the robot keeps the last command for robot.command_timeout_s, then
     brakes at the deceleration limits to a stop, logged as stopped: command_timeout."""
-    sc = load_scenario("figure8", {"sensing": "ideal"})
-    bus, transport = graph()
-    cfg = config_from_mapping({"ros": {"use_sim_time": True, "person_type": "odometry"}})
-    cfg = dataclasses.replace(cfg, params=sc.params, controller=sc.controller)
-    node = CompanionNode(cfg, transport())
-    spec = dataclasses.replace(sc.episode(), duration=4.0)
-    log, _ = run_sim_robot(spec, transport(), cfg.ros, Pacer(0.0),
-                           after=lambda t: node.tick(t) if t < 2.0 - 1e-9 else None)
-    p, t = sc.params, log["t"]
+    spec, log, _, _ = lockstep("ideal", "odometry", 4.0, silent_from=2.0)
+    p, t = spec.params, log["t"]
     talking = t < 2.0 - 1e-9
     assert set(log["status"][talking]) == {"ok"}
     held = (t >= 2.0 - 1e-9) & (t < 2.0 + p.robot.command_timeout_s - p.dt - 1e-9)
