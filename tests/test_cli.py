@@ -92,6 +92,19 @@ def test_run_with_obstacles_writes_avoidance_metrics_and_panel(tmp_path, capsys)
         assert {"u_ob", "rho_ob"} <= set(next(csv.DictReader(fh)))
 
 
+@pytest.mark.parametrize("argv, flag", [
+    (["run", "line", "--out", ""], "--out"), (["run", "line", "--params", " "], "--params"),
+    (["run", ""], "scenario"), (["node", "--zenoh-connect", ""], "--zenoh-connect"),
+    (["replay", ""], "bag")])
+def test_an_empty_value_is_an_error_not_the_default(argv, flag, capsys, tmp_path, monkeypatch):
+    """``--out ""`` would otherwise read as no --out and write out/line: one line, nothing
+    written."""
+    monkeypatch.chdir(tmp_path)
+    code, _, err = run(argv, capsys)
+    assert code == 2 and err == f"companion: error: {flag}: expected a value, got an empty text\n"
+    assert not any(tmp_path.iterdir())
+
+
 @pytest.mark.parametrize("argv, message", [
     (["run", "nosuch"], "nosuch: no built-in scenario"),
     (["run", "figur8"], "did you mean 'figure8'"),

@@ -268,9 +268,22 @@ def _terminate(signum, frame) -> None:
     raise Terminated
 
 
+def empty_value(args: argparse.Namespace) -> str | None:
+    """The flag (or argument) given an empty text, which would otherwise read as not given:
+    ``--out ""`` must not write to the default folder."""
+    for key, value in vars(args).items():
+        if isinstance(value, str) and not value.strip():
+            return key if key in ("scenario", "bag") else "--" + key.replace("_", "-")
+    return None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     ap = parser()
     args = ap.parse_args(argv)
+    empty = empty_value(args)
+    if empty:
+        print(f"companion: error: {empty}: expected a value, got an empty text", file=sys.stderr)
+        return 2
     main_thread = threading.current_thread() is threading.main_thread()
     before = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
     try:
