@@ -111,6 +111,29 @@ def test_only_the_robots_own_approach_inside_the_protective_distance_is_a_violat
     assert away["protective_steps"] == 1 and away["violations"] == 0 and not fuzz.failed(away)
 
 
+def test_a_collision_is_the_robots_doing_only_if_its_own_motion_closed_in_the_step_into_it():
+    params = Params()
+    # the robot drives into a standing person: 0.8 m, then 0.75, 0.70, ... 0.30 m apart
+    driven = fuzz.episode_counts(_log(np.linspace(0.0, 0.5, 11), np.full(11, 0.8)), params)
+    assert (driven["person_collisions"], driven["person_collisions_robot"]) == (1, 1)
+    # the person walks into a standing robot: a collision all the same, but the person's
+    walked = fuzz.episode_counts(_log(np.zeros(11), np.linspace(0.8, 0.3, 11)), params)
+    assert (walked["person_collisions"], walked["person_collisions_robot"]) == (1, 0)
+    # ... or into a robot that backs away more slowly than the person comes
+    backed = fuzz.episode_counts(_log(np.linspace(0.0, -0.2, 11), np.linspace(0.8, 0.2, 11)),
+                                 params)
+    assert (backed["person_collisions"], backed["person_collisions_robot"]) == (1, 0)
+    # the robot closes at 0.005 m/s (below fuzz.TOLERANCE) while the person walks in: theirs
+    creep = np.linspace(0.0, 0.005 * 10 * params.dt, 11)
+    crept = fuzz.episode_counts(_log(creep, np.linspace(0.8, 0.3, 11)), params)
+    assert (crept["person_collisions"], crept["person_collisions_robot"]) == (1, 0)
+    # two contacts, the second one driven by the robot
+    robot_x = np.array([0.0, 0.0, 0.0, -0.4, -0.4, -0.2, -0.2, -0.2])
+    person_x = np.array([0.8, 0.5, 0.2, 0.2, 0.2, 0.2, 0.2, 0.2])
+    twice = fuzz.episode_counts(_log(robot_x, person_x), params)
+    assert (twice["person_collisions"], twice["person_collisions_robot"]) == (2, 1)
+
+
 # The first episodes of ``companion fuzz`` (seed 0, every controller, both profiles).
 SHORT_STEPS = 20_000
 

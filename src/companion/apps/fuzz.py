@@ -82,7 +82,8 @@ def by_pair(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> tuple[dict[st
 
 def failures(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> list[dict]:
     return [{"seed": c.seed, "controller": c.controller, "sensing": c.sensing,
-             **{k: n[k] for k in ("person_collisions", "obstacle_collisions", "violations",
+             **{k: n[k] for k in ("person_collisions", "person_collisions_robot",
+                                  "obstacle_collisions", "violations",
                                   "violations_estimate", "nonfinite_steps",
                                   "min_person_distance_m", "min_obstacle_clearance_m")}}
             for c, n in zip(cases, counts) if fuzz.failed(n)]
@@ -90,14 +91,15 @@ def failures(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> list[dict]:
 
 def table(pairs: dict[str, dict], total: dict) -> str:
     head = (f"{'controller/sensing':22s} {'episodes':>8s} {'steps':>9s} {'person':>6s} "
-            f"{'obstacle':>8s} {'inside':>6s} {'robot':>5s} {'(est.)':>6s} {'nonfin':>6s} "
-            f"{'ok':>6s} {'degr.':>6s} {'stop':>6s} {'closest':>7s}")
-    lines = [f"{'':22s} {'':>8s} {'':>9s} {'collisions':>15s} {'protective steps':>20s}", head]
+            f"{'(rob.)':>6s} {'obstacle':>8s} {'inside':>6s} {'robot':>5s} {'(est.)':>6s} "
+            f"{'nonfin':>6s} {'ok':>6s} {'degr.':>6s} {'stop':>6s} {'closest':>7s}")
+    lines = [f"{'':22s} {'':>8s} {'':>9s} {'collisions':>22s} {'protective steps':>20s}", head]
     for name, t in [*pairs.items(), ("all", total)]:
         n = max(t["steps"], 1)
         lines.append(
             f"{name:22s} {t['episodes']:8d} {t['steps']:9d} {t['person_collisions']:6d} "
-            f"{t['obstacle_collisions']:8d} {t['protective_steps']:6d} {t['violations']:5d} "
+            f"{t['person_collisions_robot']:6d} {t['obstacle_collisions']:8d} "
+            f"{t['protective_steps']:6d} {t['violations']:5d} "
             f"{t['violations_estimate']:6d} {t['nonfinite_steps']:6d} "
             f"{t['ok_steps'] / n:6.1%} {t['degraded_steps'] / n:6.1%} "
             f"{t['stopped_steps'] / n:6.1%} {t['min_person_distance_m']:7.3f}")

@@ -151,7 +151,8 @@ def plan(steps: int, seed: int, controllers: Sequence[str], sensings: Sequence[s
 
 
 #: Keys of :func:`episode_counts`, in the order of fuzz.csv.
-COUNTS = ("steps", "person_collisions", "obstacle_collisions", "protective_steps",
+COUNTS = ("steps", "person_collisions", "person_collisions_robot", "obstacle_collisions",
+          "protective_steps",
           "violations", "violations_estimate", "nonfinite_steps", "ok_steps", "degraded_steps",
           "stopped_steps", "min_person_distance_m", "min_obstacle_clearance_m")
 _STATE = ("t", "robot_x", "robot_y", "robot_theta", "person_x", "person_y", "v", "omega",
@@ -170,8 +171,19 @@ def own_closing(x: np.ndarray, y: np.ndarray, px: np.ndarray, py: np.ndarray,
     return out
 
 
-def _entries(flag: np.ndarray) -> int:
-    return int(flag[0]) + int(np.count_nonzero(flag[1:] & ~flag[:-1])) if len(flag) else 0
+def _entries(flag: np.ndarray) -> np.ndarray:
+    """Where ``flag`` becomes true (its first element: if it starts true)."""
+    return flag & ~np.concatenate(([False], flag[:-1]))
+
+
+def robot_caused_entries(entries: np.ndarray, own: np.ndarray, dt: float) -> int:
+    """How many of the ``entries`` (into contact) came with the robot's own motion over the
+    step that ended in them closing on the person by more than :data:`TOLERANCE` m/s times
+    ``dt`` (``own``: :func:`own_closing` per step); an entry at the first sample has no such
+    step and counts as the person's."""
+    into = np.zeros(len(own), dtype=bool)
+    into[1:] = own[:-1] > TOLERANCE
+    return int(np.count_nonzero(entries & into))
 
 
 def episode_counts(log: Log, params: Params) -> dict:
@@ -179,6 +191,10 @@ def episode_counts(log: Log, params: Params) -> dict:
 
     * ``person_collisions``: entries into contact, robot centre closer to the person than
       ``robot.radius + lidar.person_radius`` (whoever moved);
+    * ``person_collisions_robot``: the robot-caused ones among them: the robot's own motion
+      over the step into contact closed on the person (:func:`robot_caused_entries`); the
+      others are the person's doing (it walked into a robot that stood, moved away or
+      sideways);
     * ``obstacle_collisions``: entries into footprint-obstacle overlap (clearance <= 0);
     * ``protective_steps``: steps with the robot centre inside
       ``keepout.protective_distance`` of the person (whoever moved);
@@ -194,7 +210,9 @@ def episode_counts(log: Log, params: Params) -> dict:
     x, y, px, py = log["robot_x"], log["robot_y"], log["person_x"], log["person_y"]
     dist = np.hypot(px - x, py - y)
     inside = dist < params.keepout.protective_distance
-    robot = inside & (own_closing(x, y, px, py, params.dt) > TOLERANCE)
+    own = own_closing(x, y, px, py, params.dt)
+    robot = inside & (own > TOLERANCE)
+    contact = _entries(dist < params.robot.radius + params.lidar.person_radius)
     ex, ey = log["person_est_x"], log["person_est_y"]
     est_inside = np.hypot(ex - x, ey - y) < params.keepout.protective_distance
     est_robot = est_inside & (own_closing(x, y, ex, ey, params.dt) > TOLERANCE)
@@ -205,8 +223,9 @@ def episode_counts(log: Log, params: Params) -> dict:
     status = log["status"]
     return {
         "steps": len(log),
-        "person_collisions": _entries(dist < params.robot.radius + params.lidar.person_radius),
-        "obstacle_collisions": _entries(clearance <= 0.0),
+        "person_collisions": int(np.count_nonzero(contact)),
+        "person_collisions_robot": robot_caused_entries(contact, own, params.dt),
+        "obstacle_collisions": int(np.count_nonzero(_entries(clearance <= 0.0))),
         "protective_steps": int(np.count_nonzero(inside)),
         "violations": int(np.count_nonzero(robot)),
         "violations_estimate": int(np.count_nonzero(robot & ~est_robot)),
