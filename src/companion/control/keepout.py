@@ -7,10 +7,10 @@ The safety supervisor applies them to the controller's target in this order (doc
    ``keepout.person_clearance`` (robot centre to person) and ``keepout.obstacle_clearance``
    (footprint to surface). 0 switches a barrier off.
 2. **Evasive check** (:func:`evasive_target`): when the robot and the person close in, the next
-   1.2 s are predicted (the robot through its actuator lag, the person along its estimated
-   heading and ``keepout.heading_sigmas`` standard deviations to either side) and a command
-   that would come within 5 cm of the protective distance or of an obstacle is replaced by
-   the closest safe one of a grid.
+   ``keepout.evasive_horizon_s`` are predicted (the robot through its actuator lag, the person
+   along its estimated heading and ``keepout.heading_sigmas`` standard deviations to either
+   side) and a command that would come within 5 cm of the protective distance or of an
+   obstacle is replaced by the closest safe one of a grid.
 3. **Braking bound** (:func:`braking_bound`): inside ``protective_distance`` the robot may only
    turn or move away; outside it, and towards obstacles, the approach speed is what braking at
    the rate limit can still stop in time, counting one period of delay and the distance the
@@ -359,7 +359,8 @@ def keep_out(target: tuple[float, float, float], robot: Pose, estimate: PersonEs
     v = barrier_speed(v, robot, person, obstacles, params)
     if closing(robot, person, v_now[0], params, grow):
         spread = params.keepout.heading_sigmas * heading_std(estimate)
-        evade = evasive_target(robot, v_now, (v, w), person, obstacles, params, grow, spread)
+        evade = evasive_target(robot, v_now, (v, w), person, obstacles, params, grow, spread,
+                               horizon=params.keepout.evasive_horizon_s)
         if evade is not None:
             (v, w), u_ob = evade, 0.0
             reasons.append("evasive")

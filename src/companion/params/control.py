@@ -37,6 +37,11 @@ def _step_ratio(x: float) -> str | None:
     return None if 1.0 < x < math.inf else "a finite ratio > 1"
 
 
+@ranged("[0.1, 10]")
+def _horizon(x: float) -> str | None:
+    return None if 0.1 <= x <= 10.0 else "a time in [0.1, 10] s"
+
+
 @dataclasses.dataclass(frozen=True)
 class RobotParams(Validated):
     """Differential-drive robot: geometry and input limits."""
@@ -128,6 +133,9 @@ class KeepOutParams(Validated):
                                       "time the robot reacts (the estimate's position and "
                                       "velocity uncertainty over one period, the actuator lag "
                                       "and the detection latency)", non_negative)
+    evasive_horizon_s: float = param(1.2, "s", "how far ahead the evasive check predicts "
+                                     "robot and person; longer sees a person who walks at "
+                                     "the robot earlier, and acts more often", _horizon)
     heading_sigmas: float = param(1.5, "-", "the evasive check also predicts the person "
                                   "walking this many standard deviations of its estimated "
                                   "heading to either side (at most pi/4); 0: only along it",
