@@ -134,7 +134,9 @@ def test_truncated_or_corrupt_bag(tmp_path, run_bag, capsys, damage):
         raw[len(raw) // 3: len(raw) // 3 + 4096] = bytes(4096)
     data.write_bytes(bytes(raw))
     err = _bad(capsys, tmp_path, bag)
-    assert "record" in err or "not a readable" in err
+    # zeros that land in the file's structure break a record; in a message, its decoding
+    assert "record" in err or "not a readable" in err \
+        or ("topic /" in err and "cannot be decoded" in err)
 
 
 def test_empty_bag(tmp_path, capsys):
