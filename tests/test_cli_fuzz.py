@@ -39,8 +39,8 @@ def test_fuzz_writes_one_row_per_episode_and_a_replay_gives_the_same_counts(tmp_
 def test_fuzz_exits_1_and_names_the_seed_of_a_failing_episode(tmp_path, capsys, monkeypatch):
     real = fuzz.episode_counts
 
-    def collided(log, params):
-        counts = real(log, params)
+    def collided(log, params, obstacles=()):
+        counts = real(log, params, obstacles)
         return dict(counts, obstacle_collisions=1)
 
     monkeypatch.setattr(fuzz, "episode_counts", collided)
@@ -49,6 +49,27 @@ def test_fuzz_exits_1_and_names_the_seed_of_a_failing_episode(tmp_path, capsys, 
     assert code == 1
     assert "FAIL seed 0 vsm/realistic: replay with companion fuzz --replay 0" in out
     assert json.loads((tmp_path / "fuzz.json").read_text())["failed"][0]["seed"] == 0
+
+
+def test_fuzz_runs_on_the_parameters_of_params(tmp_path, capsys):
+    params = tmp_path / "p.toml"
+    params.write_text("[keepout]\nevasive_horizon_s = 2.0\n")
+    argv = ["--steps", "300", "--controllers", "lqr", "--sensing", "ideal", "--workers", "1"]
+    run(["fuzz", *argv, "--out", str(tmp_path / "a")], capsys)
+    run(["fuzz", *argv, "--params", str(params), "--out", str(tmp_path / "b")], capsys)
+    a, b = (json.loads((tmp_path / d / "fuzz.json").read_text()) for d in "ab")
+    assert b["params"] == str(params) and a["params"] is None
+    assert a["total"]["steps"] == b["total"]["steps"]
+    assert a["total"]["degraded_steps"] != b["total"]["degraded_steps"]
+
+
+def test_a_bad_params_file_for_fuzz_names_the_file_and_key(tmp_path, capsys):
+    params = tmp_path / "p.toml"
+    params.write_text("[keepout]\nevasive_horizon_s = 0.0\n")
+    code, _, err = run(["fuzz", "--params", str(params), "--out", str(tmp_path / "o")], capsys)
+    assert code == 2
+    assert f"{params}: keepout.evasive_horizon_s: expected a time in [0.1, 10] s" in err
+    assert not (tmp_path / "o").exists()
 
 
 @pytest.mark.parametrize("argv, message", [

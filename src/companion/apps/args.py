@@ -88,12 +88,15 @@ def checked_controllers(names: Sequence[str], params: Params, where: str | None)
             raise UsageError(f"{where}: {exc}" if where else str(exc)) from None
 
 
-def params_arg(args: argparse.Namespace) -> Params:
-    """Table 1 defaults, or the ``--params FILE`` given, validated with the file's name, with
-    the ``--sensing`` given."""
-    params = Params() if not args.params else params_from_mapping(
+def file_params(args: argparse.Namespace) -> Params:
+    """Table 1 defaults, or the ``--params FILE`` given, validated with the file's name."""
+    return Params() if not args.params else params_from_mapping(
         load_toml(args.params), prefix=f"{args.params}: ")
-    return with_sensing(params, args)
+
+
+def params_arg(args: argparse.Namespace) -> Params:
+    """:func:`file_params` with the ``--sensing`` given."""
+    return with_sensing(file_params(args), args)
 
 
 def with_sensing(params: Params, args: argparse.Namespace) -> Params:

@@ -169,6 +169,8 @@ def parser() -> argparse.ArgumentParser:
     fz.add_argument("--replay", type=int, metavar="SEED", help="run the episode of this seed "
                     f"({rng('--replay', 'SEED')}; a row of fuzz.csv) with one --controllers and "
                     "one --sensing, and write its log.csv and episode.json")
+    fz.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides (the "
+                    "episodes draw their own formation and take --sensing's profiles)")
     fz.add_argument("--out", metavar="DIR", help="output folder (default out/fuzz)")
     _workers(fz)
     fz.set_defaults(func="cmd_fuzz")

@@ -25,6 +25,7 @@ from companion.apps.args import (
     build_scenario,
     checked_controllers,
     duration_arg,
+    file_params,
     floats_arg,
     int_arg,
     number_arg,
@@ -267,13 +268,14 @@ def cmd_soak(args: argparse.Namespace) -> int:
 
 def cmd_fuzz(args: argparse.Namespace) -> int:
     controllers, sensings = fuzz.selection(args)
+    base = file_params(args)
     out = output_dir(Path(args.out or Path("out") / "fuzz"))
     if args.replay is not None:
         if len(controllers) != 1 or len(sensings) != 1:
             raise UsageError("--replay: give the episode's controller and sensing as one "
                              "--controllers NAME and one --sensing NAME (fuzz.csv has them)")
         seed = int_arg(args.replay, "--replay", "SEED")
-        case, counts, log = fuzz.replay(seed, controllers[0], sensings[0])
+        case, counts, log = fuzz.replay(seed, controllers[0], sensings[0], base)
         with Outputs(out, "fuzz-replay") as stage:
             write_log(stage / "log.csv", log)
             write_json(stage / "episode.json", {"case": vars(case), "counts": counts})
@@ -288,10 +290,11 @@ def cmd_fuzz(args: argparse.Namespace) -> int:
           f"{', '.join(sensings)} sensing")
     episodes = fuzz.plan(steps, seed, controllers, sensings)
     with progress_bar(len(episodes), "episode") as progress:
-        cases, counts = fuzz.run(episodes, workers, progress)
+        cases, counts = fuzz.run(episodes, workers, progress, base)
     pairs, total = fuzz.by_pair(cases, counts)
     failed = fuzz.failures(cases, counts)
-    report = {"steps_requested": steps, "seed": seed, "controllers": list(controllers),
+    report = {"steps_requested": steps, "seed": seed, "params": args.params,
+              "controllers": list(controllers),
               "sensing": list(sensings), "wall_time_s": round(time.monotonic() - start, 1),
               "total": total, "by_pair": pairs, "failed": failed}
     with Outputs(out, "fuzz") as stage:

@@ -12,7 +12,7 @@ from companion.apps.flags import FLAGS
 from companion.control import CONTROLLERS
 from companion.params import PROFILES, Params
 from companion.sim import fuzz
-from companion.sim.runner import run_many, run_one
+from companion.sim.runner import WithSpec, run_many, run_one
 from companion.types import Log
 
 #: Bounds of --steps and --seed (the episode seeds stay below 2**63).
@@ -50,21 +50,25 @@ plan, failed = fuzz.plan, fuzz.failed
 
 
 def run(episodes: Sequence[tuple[int, str, str]], workers: int | None,
-        progress: Callable[[int], None] | None = None
+        progress: Callable[[int], None] | None = None, base: Params | None = None
         ) -> tuple[list[fuzz.Case], list[dict]]:
-    """Draw and run the ``episodes`` of :func:`plan`; their cases and counts, in order."""
-    drawn = [fuzz.draw(*episode) for episode in episodes]
+    """Draw and run the ``episodes`` of :func:`plan` (on the parameters ``base``, default
+    Table 1's); their cases and counts, in order."""
+    base = base or Params()
+    drawn = [fuzz.draw(*episode, base=base) for episode in episodes]
     counts = run_many([spec for _, spec in drawn], workers,
-                      summarize=partial(fuzz.episode_counts, params=Params()),
+                      summarize=WithSpec(partial(fuzz.spec_counts, params=base)),
                       progress=progress)
     return [case for case, _ in drawn], counts
 
 
-def replay(seed: int, controller: str, sensing: str) -> tuple[fuzz.Case, dict, Log]:
+def replay(seed: int, controller: str, sensing: str, base: Params | None = None
+           ) -> tuple[fuzz.Case, dict, Log]:
     """One episode again: its case, counts and log."""
-    case, spec = fuzz.draw(seed, controller, sensing)
+    base = base or Params()
+    case, spec = fuzz.draw(seed, controller, sensing, base)
     log = run_one(spec)
-    return case, fuzz.episode_counts(log, Params()), log
+    return case, fuzz.episode_counts(log, base, spec.obstacles), log
 
 
 def csv_rows(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> list[tuple]:
@@ -83,24 +87,29 @@ def by_pair(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> tuple[dict[st
 def failures(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> list[dict]:
     return [{"seed": c.seed, "controller": c.controller, "sensing": c.sensing,
              **{k: n[k] for k in ("person_collisions", "person_collisions_robot",
-                                  "obstacle_collisions", "violations",
-                                  "violations_estimate", "nonfinite_steps",
+                                  "person_collisions_unescapable", "obstacle_collisions",
+                                  "violations", "violations_estimate",
+                                  "violations_walkthrough", "nonfinite_steps",
                                   "min_person_distance_m", "min_obstacle_clearance_m")}}
             for c, n in zip(cases, counts) if fuzz.failed(n)]
 
 
 def table(pairs: dict[str, dict], total: dict) -> str:
+    """The printed table: per pair and in all, collisions (robot-caused, and of the person's
+    those no command could escape), protective steps (robot-caused outside walk-throughs,
+    of them from the estimate, and during walk-throughs), statuses and the closest approach."""
     head = (f"{'controller/sensing':22s} {'episodes':>8s} {'steps':>9s} {'person':>6s} "
-            f"{'(rob.)':>6s} {'obstacle':>8s} {'inside':>6s} {'robot':>5s} {'(est.)':>6s} "
-            f"{'nonfin':>6s} {'ok':>6s} {'degr.':>6s} {'stop':>6s} {'closest':>7s}")
-    lines = [f"{'':22s} {'':>8s} {'':>9s} {'collisions':>22s} {'protective steps':>20s}", head]
+            f"{'(rob.)':>6s} {'(unesc.)':>8s} {'obstacle':>8s} {'inside':>6s} {'robot':>5s} "
+            f"{'(est.)':>6s} {'(walk)':>6s} {'nonfin':>6s} {'ok':>6s} {'degr.':>6s} "
+            f"{'stop':>6s} {'closest':>7s}")
+    lines = [f"{'':22s} {'':>8s} {'':>9s} {'collisions':>31s} {'protective steps':>28s}", head]
     for name, t in [*pairs.items(), ("all", total)]:
         n = max(t["steps"], 1)
         lines.append(
             f"{name:22s} {t['episodes']:8d} {t['steps']:9d} {t['person_collisions']:6d} "
-            f"{t['person_collisions_robot']:6d} {t['obstacle_collisions']:8d} "
-            f"{t['protective_steps']:6d} {t['violations']:5d} "
-            f"{t['violations_estimate']:6d} {t['nonfinite_steps']:6d} "
-            f"{t['ok_steps'] / n:6.1%} {t['degraded_steps'] / n:6.1%} "
+            f"{t['person_collisions_robot']:6d} {t['person_collisions_unescapable']:8d} "
+            f"{t['obstacle_collisions']:8d} {t['protective_steps']:6d} {t['violations']:5d} "
+            f"{t['violations_estimate']:6d} {t['violations_walkthrough']:6d} "
+            f"{t['nonfinite_steps']:6d} {t['ok_steps'] / n:6.1%} {t['degraded_steps'] / n:6.1%} "
             f"{t['stopped_steps'] / n:6.1%} {t['min_person_distance_m']:7.3f}")
     return "\n".join(lines)

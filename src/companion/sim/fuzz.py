@@ -21,9 +21,10 @@ import numpy as np
 
 from companion.params import PROFILES, Formation, Params
 from companion.sim.episode import start_in_slot
+from companion.sim.escape import escapable
 from companion.sim.runner import EpisodeSpec
 from companion.sim.soak import PILLAR_RADIUS, Walker, arena_walls, pillars, random_walk
-from companion.types import Log, PersonState, Pose
+from companion.types import Log, Obstacle, PersonState, Pose
 
 #: The fuzz walker: the soak's phases, up to 2 m/s, shorter walks and sharper turns.
 WALKER = Walker(walk_time=(1.0, 6.0), walk_speed=(0.3, 2.0), sharp_speed=(0.3, 1.2),
@@ -151,10 +152,11 @@ def plan(steps: int, seed: int, controllers: Sequence[str], sensings: Sequence[s
 
 
 #: Keys of :func:`episode_counts`, in the order of fuzz.csv.
-COUNTS = ("steps", "person_collisions", "person_collisions_robot", "obstacle_collisions",
-          "protective_steps",
-          "violations", "violations_estimate", "nonfinite_steps", "ok_steps", "degraded_steps",
-          "stopped_steps", "min_person_distance_m", "min_obstacle_clearance_m")
+COUNTS = ("steps", "person_collisions", "person_collisions_robot",
+          "person_collisions_unescapable", "obstacle_collisions", "protective_steps",
+          "violations", "violations_estimate", "violations_walkthrough", "nonfinite_steps",
+          "ok_steps", "degraded_steps", "stopped_steps", "min_person_distance_m",
+          "min_obstacle_clearance_m")
 _STATE = ("t", "robot_x", "robot_y", "robot_theta", "person_x", "person_y", "v", "omega",
           "robot_v", "robot_omega")
 
@@ -176,46 +178,66 @@ def _entries(flag: np.ndarray) -> np.ndarray:
     return flag & ~np.concatenate(([False], flag[:-1]))
 
 
-def robot_caused_entries(entries: np.ndarray, own: np.ndarray, dt: float) -> int:
-    """How many of the ``entries`` (into contact) came with the robot's own motion over the
-    step that ended in them closing on the person by more than :data:`TOLERANCE` m/s times
-    ``dt`` (``own``: :func:`own_closing` per step); an entry at the first sample has no such
-    step and counts as the person's."""
+def robot_caused(entries: np.ndarray, own: np.ndarray) -> np.ndarray:
+    """Which of the ``entries`` (into contact) came with the robot's own motion over the
+    step that ended in them closing on the person faster than :data:`TOLERANCE` m/s
+    (``own``: :func:`own_closing` per step); an entry at the first sample has no such step
+    and counts as the person's."""
     into = np.zeros(len(own), dtype=bool)
     into[1:] = own[:-1] > TOLERANCE
-    return int(np.count_nonzero(entries & into))
+    return entries & into
 
 
-def episode_counts(log: Log, params: Params) -> dict:
+def walkthroughs(entries: np.ndarray, dist: np.ndarray, zone: float) -> np.ndarray:
+    """Steps from each of the ``entries`` (contacts the person caused) until the person is
+    again ``zone`` or more away (``dist``: robot centre to person per step)."""
+    out = np.zeros(len(dist), dtype=bool)
+    outside = np.flatnonzero(dist >= zone)
+    for k in np.flatnonzero(entries):
+        later = outside[outside > k]
+        out[k:later[0] if len(later) else len(dist)] = True
+    return out
+
+
+def episode_counts(log: Log, params: Params, obstacles: Sequence[Obstacle] = ()) -> dict:
     """Safety counts of one fuzz episode, against the TRUE person and obstacles.
 
     * ``person_collisions``: entries into contact, robot centre closer to the person than
       ``robot.radius + lidar.person_radius`` (whoever moved);
     * ``person_collisions_robot``: the robot-caused ones among them: the robot's own motion
-      over the step into contact closed on the person (:func:`robot_caused_entries`); the
-      others are the person's doing (it walked into a robot that stood, moved away or
-      sideways);
+      over the step into contact closed on the person (:func:`robot_caused`); the others are
+      the person's doing (it walked into a robot that stood, moved away or sideways);
+    * ``person_collisions_unescapable``: of the person's, those that no constant command
+      could have escaped even knowing the person's path (:func:`companion.sim.escape.escapable`,
+      with the episode's ``obstacles``);
     * ``obstacle_collisions``: entries into footprint-obstacle overlap (clearance <= 0);
     * ``protective_steps``: steps with the robot centre inside
       ``keepout.protective_distance`` of the person (whoever moved);
     * ``violations``: the robot-caused ones among them: the robot's own motion over the step
       (:func:`own_closing`, the person held where it is) brings it closer than
-      :data:`TOLERANCE` m/s times dt;
+      :data:`TOLERANCE` m/s times dt, outside the walk-throughs below;
     * ``violations_estimate``: of those, the steps that are not violations against the
       tracker's estimate (outside the protective distance of the estimate, or not closing on
       it): the supervisor acted on a wrong estimate;
+    * ``violations_walkthrough``: such steps during a contact the person caused, until the
+      person is out of the protective distance again (:func:`walkthroughs`): the walker does
+      not see the robot and walks through its body, so which way is "towards the person"
+      turns over within a few steps; counted apart, not as violations;
     * ``nonfinite_steps``: steps with a non-finite state, command or velocity;
     * ``ok_steps``, ``degraded_steps``, ``stopped_steps``: the supervisor's status.
     """
     x, y, px, py = log["robot_x"], log["robot_y"], log["person_x"], log["person_y"]
     dist = np.hypot(px - x, py - y)
-    inside = dist < params.keepout.protective_distance
+    zone = params.keepout.protective_distance
     own = own_closing(x, y, px, py, params.dt)
-    robot = inside & (own > TOLERANCE)
     contact = _entries(dist < params.robot.radius + params.lidar.person_radius)
+    by_robot = robot_caused(contact, own)
+    by_person = np.flatnonzero(contact & ~by_robot)
+    through = walkthroughs(contact & ~by_robot, dist, zone)
+    robot = (dist < zone) & (own > TOLERANCE)
     ex, ey = log["person_est_x"], log["person_est_y"]
-    est_inside = np.hypot(ex - x, ey - y) < params.keepout.protective_distance
-    est_robot = est_inside & (own_closing(x, y, ex, ey, params.dt) > TOLERANCE)
+    est_robot = (np.hypot(ex - x, ey - y) < zone) & \
+        (own_closing(x, y, ex, ey, params.dt) > TOLERANCE)
     finite = np.ones(len(log), dtype=bool)
     for c in _STATE:
         finite &= np.isfinite(log[c])
@@ -224,11 +246,14 @@ def episode_counts(log: Log, params: Params) -> dict:
     return {
         "steps": len(log),
         "person_collisions": int(np.count_nonzero(contact)),
-        "person_collisions_robot": robot_caused_entries(contact, own, params.dt),
+        "person_collisions_robot": int(np.count_nonzero(by_robot)),
+        "person_collisions_unescapable": sum(not escapable(log, int(k), params, obstacles)
+                                             for k in by_person),
         "obstacle_collisions": int(np.count_nonzero(_entries(clearance <= 0.0))),
-        "protective_steps": int(np.count_nonzero(inside)),
-        "violations": int(np.count_nonzero(robot)),
-        "violations_estimate": int(np.count_nonzero(robot & ~est_robot)),
+        "protective_steps": int(np.count_nonzero(dist < zone)),
+        "violations": int(np.count_nonzero(robot & ~through)),
+        "violations_estimate": int(np.count_nonzero(robot & ~through & ~est_robot)),
+        "violations_walkthrough": int(np.count_nonzero(robot & through)),
         "nonfinite_steps": int(np.count_nonzero(~finite)),
         "ok_steps": int(np.count_nonzero(status == "ok")),
         "degraded_steps": int(np.count_nonzero(status == "degraded")),
@@ -237,6 +262,12 @@ def episode_counts(log: Log, params: Params) -> dict:
         "min_obstacle_clearance_m": float(np.nanmin(clearance))
         if np.any(np.isfinite(clearance)) else math.nan,
     }
+
+
+def spec_counts(log: Log, spec: EpisodeSpec, params: Params) -> dict:
+    """:func:`episode_counts` of an episode with its obstacles (for
+    :class:`~companion.sim.runner.WithSpec`); ``params`` gives the thresholds."""
+    return episode_counts(log, params, spec.obstacles)
 
 
 def failed(counts: dict) -> bool:
