@@ -113,17 +113,53 @@ def test_both_readers_agree_on_good_files(tmp_path, text):
     assert x[:3].tolist() == [0.0, 0.5, 1.0] and not np.any(y)
 
 
+def peak_memory(args: list[str]) -> int:
+    """Peak resident memory (bytes) of ``python args`` run to success in a child process."""
+    child = subprocess.Popen([sys.executable, *args], stdout=subprocess.DEVNULL)
+    _, status, usage = os.wait4(child.pid, 0)
+    assert os.waitstatus_to_exitcode(status) == 0
+    return usage.ru_maxrss * 1024   # ru_maxrss is in KiB on Linux
+
+
 @pytest.mark.slow
 def test_peak_memory_of_a_run_does_not_grow_with_its_duration(tmp_path):
     """``companion run figure8`` for 1800 and 3600 s in child processes: the second would
     hold 36,000 more rows of its log if it kept it (about 30 MB: 8 MB of numbers, the rest
     text)."""
-    peaks = []
-    for duration in ("1800", "3600"):
-        child = subprocess.Popen([sys.executable, "-m", "companion.apps.cli", "run", "figure8",
-                                  "--duration", duration, "--out", str(tmp_path / duration)],
-                                 stdout=subprocess.DEVNULL)
-        _, status, usage = os.wait4(child.pid, 0)
-        assert os.waitstatus_to_exitcode(status) == 0
-        peaks.append(usage.ru_maxrss * 1024)   # ru_maxrss is in KiB on Linux
+    peaks = [peak_memory(["-m", "companion.apps.cli", "run", "figure8", "--duration", duration,
+                          "--out", str(tmp_path / duration)]) for duration in ("1800", "3600")]
     assert peaks[1] - peaks[0] < 10e6, peaks
+
+
+PLOTS_OF_LAPS = """
+import sys
+import numpy as np
+from companion.apps import plots
+from companion.apps.logfile import PLOT_ROWS
+from companion.io import save_figure
+from companion.params import Params
+from companion.types import LOG_COLUMNS, Log
+
+laps, out = int(sys.argv[1]), sys.argv[2]
+phase = np.linspace(0.0, 2.0 * np.pi * laps, PLOT_ROWS)
+columns = {c: np.sin(phase + i) for i, c in enumerate(LOG_COLUMNS)}
+columns.update(t=60.0 * phase / (2.0 * np.pi), person_x=4.0 * np.sin(phase),
+               person_y=2.0 * np.sin(2.0 * phase), robot_x=4.5 * np.sin(phase),
+               robot_y=2.5 * np.sin(2.0 * phase), status=np.full(PLOT_ROWS, "ok"),
+               reason=np.full(PLOT_ROWS, ""))
+runs = {"lqr": Log(columns)}
+for name, fig in [("trajectory", plots.trajectories(runs)),
+                  ("errors", plots.errors_over_time(runs)),
+                  ("inputs", plots.inputs_over_time(runs, Params()))]:
+    save_figure(fig, f"{out}-{name}.png")
+    plots.close(fig)
+"""
+
+
+def test_memory_of_the_plots_does_not_grow_with_the_laps_they_draw(tmp_path):
+    """The figures of ``companion run --plot`` from :data:`logfile.PLOT_ROWS` rows of one lap
+    of a figure-8 and of 1,440 (a day-long run's thinned log), in child processes: with each
+    line rasterized in one piece, the second took about 240 MB more."""
+    peaks = [peak_memory(["-c", PLOTS_OF_LAPS, str(laps), str(tmp_path / str(laps))])
+             for laps in (1, 1440)]
+    assert peaks[1] - peaks[0] < 20e6, peaks

@@ -22,6 +22,16 @@ PERSON = "tab:red"
 ROBOT = "tab:purple"
 #: Most heading arrows drawn along one path (:func:`trajectories`).
 MAX_ARROWS = 400
+#: Points of a line that Agg rasterizes at a time (matplotlib's ``agg.path.chunksize``).
+#: Agg's memory for a line grows with its length on the canvas, not with its points: the
+#: 50,000 plotted rows of a day-long figure-8 run retrace the figure over 1,440 laps, and
+#: with each line drawn in one piece, saving the trajectories took 155 MB more than for a
+#: lap. In pieces, each piece's memory is freed before the next one is drawn (matplotlib
+#: leaves out the two segments around one point at each joint, which the line's width
+#: covers at this many points).
+AGG_CHUNK = 1000
+
+matplotlib.rcParams["agg.path.chunksize"] = AGG_CHUNK
 
 
 def _headings(ax, x, y, th, every: int, color: str) -> None:
