@@ -16,13 +16,15 @@ larger share means the tracker is overconfident on that kind of walker.
 from __future__ import annotations
 
 import argparse
+import sys
 
 import numpy as np
 
 from companion.apps import pedestrians as walkers
-from companion.config import load_toml
+from companion.apps.args import file_params
 from companion.data import pedestrians
-from companion.params import REALISTIC, Params, params_from_mapping
+from companion.errors import CompanionError
+from companion.params import REALISTIC
 from companion.sim import fuzz
 from companion.sim.runner import run_many
 
@@ -55,8 +57,10 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=60, help="fuzz walkers (60)")
     ap.add_argument("--params", help="TOML file of parameter overrides")
     args = ap.parse_args()
-    base = params_from_mapping(load_toml(args.params), prefix=f"{args.params}: ") \
-        if args.params else Params()
+    try:
+        base = file_params(args)
+    except CompanionError as exc:
+        sys.exit(f"tracker_consistency: {exc}")
     params = base.replace(sensing=REALISTIC)
     tracks = pedestrians.select_tracks(pedestrians.load_scenes())[::args.every]
     specs = [walkers.episode(t, params, side=side) for t in tracks for side in ("left", "right")]
