@@ -68,7 +68,8 @@ class PersonEstimate:
     about; ``walker`` the state the formation is defined on: the same, but a standing person
     (too slow for positions to tell a heading) faces the way it last walked, without speed or
     turning. Also: the standard deviation of the position (m, the larger axis of its 2x2
-    covariance), the 5x5 covariance of the tracker's state (x, y, vx, vy, omega), the time
+    covariance), the 5x5 covariance of the tracker's state (x, y, vx, vy, omega; its position
+    part widened while the detections show a manoeuvre the filter did not expect), the time
     since the last accepted detection (s) and the track's status, "seen" or "predicted"
     (coasting over missing detections).
     """

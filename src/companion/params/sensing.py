@@ -103,6 +103,13 @@ class TrackerParams(Validated):
                                       positive)
     maneuver_turn_accel_std: float = param(3.5, "rad/s^2", "manoeuvre model: white "
                                            "acceleration of the turn rate", positive)
+    inflate_nis: float = param(2.0, "-", "a detection whose squared Mahalanobis distance of "
+                               "position from the prediction exceeds this widens the reported "
+                               "position covariance by their ratio (the filter's own update is "
+                               "unchanged): the estimate admits a manoeuvre its models did not "
+                               "expect; inf: never", positive_or_inf)
+    inflate_time_s: float = param(0.5, "s", "time constant with which that widening decays "
+                                  "from one detection to the next", positive)
     maneuver_start_rate: float = param(0.15, "1/s", "how often a steady walk turns into a "
                                        "manoeuvre (the models' switching rate)", positive)
     maneuver_end_rate: float = param(5.0, "1/s", "how often a manoeuvre ends", positive)

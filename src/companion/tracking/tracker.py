@@ -5,9 +5,10 @@ Mahalanobis distance of their position (another person, or an identity switch, f
 outside), and merged in time order into the walker filter (:mod:`.walker`): a late
 detection re-filters the detections after it. Between detections the track is predicted;
 after ``lost_after_s`` s without one, or when its position grows too uncertain, the person is
-lost, and a new track needs ``reacquire_time_s`` s of consistent detections. An exact
-full-state detection (all stds 0, an ideal sensor) sets the state exactly. docs/sensing.md
-explains the choices.
+lost, and a new track needs ``reacquire_time_s`` s of consistent detections. While detections
+fall farther from the prediction than the filter expects (a manoeuvre its models did not
+foresee), the reported position covariance is widened to match. An exact full-state detection
+(all stds 0, an ideal sensor) sets the state exactly. docs/sensing.md explains the choices.
 """
 
 from __future__ import annotations
@@ -21,7 +22,14 @@ import numpy as np
 
 from companion.geometry import wrap_pi
 from companion.params import TrackerParams
-from companion.tracking.walker import Belief, WalkerFilter, position_cov, predict
+from companion.tracking.walker import (
+    Belief,
+    WalkerFilter,
+    position_cov,
+    position_nis,
+    predict,
+    widened,
+)
 from companion.types import PersonDetection, PersonEstimate, PersonState, Pose
 
 #: Largest plausible coordinate (m) and standard deviation (m, rad, m/s) of a detection.
@@ -45,6 +53,7 @@ class _Posterior:
     t: float
     detection: PersonDetection
     belief: Belief
+    inflation: float = 1.0   # the widening of the reported position covariance
 
 
 class PersonTracker:
@@ -171,7 +180,20 @@ class PersonTracker:
 
     def _apply(self, d: PersonDetection, prior: Belief) -> None:
         """Append the posterior of the ``prior`` at ``d``'s time updated with ``d``."""
-        self._history.append(_Posterior(d.t, d, self._filter.update(prior, d)))
+        self._history.append(_Posterior(d.t, d, self._filter.update(prior, d),
+                                        self._inflation(prior, d)))
+
+    def _inflation(self, prior: Belief, d: PersonDetection) -> float:
+        """How much wider than the filter's the reported position covariance is after ``d``:
+        ``d``'s squared Mahalanobis distance from the ``prior`` over ``inflate_nis`` if
+        that is more than the last detection's widening, decayed over the time between
+        them, else the latter (at least 1). The filter itself is not widened: its mean stays
+        as smooth as on an ordinary walk, only the keep-out rules see the doubt."""
+        p = self.params
+        last = self._history[-1] if self._history else None
+        held = 1.0 if last is None else \
+            1.0 + (last.inflation - 1.0) * math.exp(-(d.t - last.t) / p.inflate_time_s)
+        return max(held, position_nis(prior, d, p) / p.inflate_nis)
 
     def _start(self, d: PersonDetection) -> _Posterior:
         return _Posterior(d.t, d, self._filter.start(d))
@@ -226,7 +248,8 @@ class PersonTracker:
         status = "seen" if age <= p.coast_after_s else "predicted"
         if status == "predicted":
             reasons.append("person_predicted")
-        if std > p.uncertain_std_m:
+        k = last.inflation
+        if std * math.sqrt(k) > p.uncertain_std_m:
             reasons.append("person_uncertain")
         if last.belief.exact:                 # an ideal sensor: exactly as detected
             d = last.detection
@@ -236,7 +259,8 @@ class PersonTracker:
             return PersonEstimate(state, std, cov, age, status, state)
         state = PersonState(float(x[0]), float(x[1]), math.atan2(x[3], x[2]),
                             math.hypot(x[2], x[3]), float(x[4]))
-        return PersonEstimate(state, std, cov, age, status, self._walker(state, cov))
+        return PersonEstimate(state, std * math.sqrt(k), widened(cov, k), age, status,
+                              self._walker(state, cov))
 
     def _walker(self, state: PersonState, cov: np.ndarray) -> PersonState:
         """The formation's person: while standing (speed below ``standing_speed``, or its

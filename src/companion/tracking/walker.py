@@ -216,6 +216,31 @@ class WalkerFilter:
         return Belief(xs, ps, mu / mu.sum())
 
 
+def position_nis(b: Belief, d: PersonDetection, p: TrackerParams) -> float:
+    """Squared Mahalanobis distance of ``d``'s position from ``b`` (belief and detection
+    covariance together; 2 degrees of freedom, so about 2 on average when the filter's
+    uncertainty is honest). 0 where it cannot be computed."""
+    x, cov = b.x, b.p
+    innov = np.array((d.x - x[0], d.y - x[1]))
+    s = cov[:2, :2] + position_cov(d, p) + MIN_STD ** 2 * np.eye(2)
+    try:
+        nis = float(innov @ np.linalg.solve(s, innov))
+    except np.linalg.LinAlgError:
+        return 0.0
+    return nis if math.isfinite(nis) else 0.0
+
+
+def widened(cov: np.ndarray, k: float) -> np.ndarray:
+    """``cov`` with its position part widened ``k`` times (``D cov D``, ``D = diag(sqrt k,
+    sqrt k, 1, 1, 1)``: the position variances times ``k``, their covariances with the rest
+    times ``sqrt k``; still a covariance)."""
+    if k == 1.0:
+        return cov
+    d = np.ones(len(cov))
+    d[:2] = math.sqrt(k)
+    return cov * np.outer(d, d)
+
+
 def _log_likelihood(y: np.ndarray, s: np.ndarray) -> float:
     """log N(y; 0, S) of the innovation, with S symmetrised (the unscented transform leaves it
     asymmetric by rounding) and -inf where it is not a covariance (never raises)."""
