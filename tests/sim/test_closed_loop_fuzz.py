@@ -194,14 +194,14 @@ def test_short_fuzz_no_obstacle_collision_and_ideal_sensing_is_never_the_robots_
 # faster than the 10 Hz detections showed; 6 robot-caused steps, 3 of them closing on the
 # estimate too) and seeds 8, 10, 22, 24, where the walker walked into the robot (each
 # escapable in hindsight: sim.escape).
-@pytest.mark.xfail(strict=True, reason="seed 21 pid/realistic: 6 robot-caused steps inside "
+@pytest.mark.xfail(strict=True, reason="seed 21 pid/realistic: 3 robot-caused steps inside "
                    "the protective distance, the estimate lagging a person who started to walk")
 def test_short_fuzz_no_robot_caused_violation(short_run):
     cases, counts = short_run
     assert [c.seed for c, n in zip(cases, counts) if n["violations"]] == []
 
 
-@pytest.mark.xfail(strict=True, reason="person collisions in seeds 8, 10, 21, 22, 24 (in all "
+@pytest.mark.xfail(strict=True, reason="person collisions in seeds 10, 21, 22, 24 (in all "
                    "but 21 the walker walked into the robot)")
 def test_short_fuzz_no_collision(short_run):
     cases, counts = short_run
