@@ -191,8 +191,8 @@ def test_short_fuzz_no_obstacle_collision_and_ideal_sensing_is_never_the_robots_
 
 # Measured 2026-11-26 (docs/safety.md, "Closed-loop fuzz"): the short run's failing episodes
 # are seed 21 (pid/realistic: the robot drove into a person who started to walk towards it
-# faster than the 10 Hz detections showed; 6 robot-caused steps, 3 of them closing on the
-# estimate too) and seeds 8, 10, 22, 24, where the walker walked into the robot (each
+# faster than the 10 Hz detections showed; 3 robot-caused steps, none of them closing on the
+# estimate too) and seeds 10, 22, 24, where the walker walked into the robot (each
 # escapable in hindsight: sim.escape).
 @pytest.mark.xfail(strict=True, reason="seed 21 pid/realistic: 3 robot-caused steps inside "
                    "the protective distance, the estimate lagging a person who started to walk")

@@ -25,7 +25,6 @@ from companion.params import TrackerParams
 from companion.tracking.walker import (
     Belief,
     WalkerFilter,
-    position_cov,
     position_nis,
     predict,
     widened,
@@ -168,8 +167,7 @@ class PersonTracker:
             innov = np.array((d.x - x[0], d.y - x[1]))
             if math.hypot(*innov) > p.max_person_speed * dt + p.gate_floor_m + 3 * _std(d, p):
                 continue
-            s = cov[:2, :2] + position_cov(d, p) + p.gate_floor_m ** 2 * np.eye(2)
-            d2 = float(innov @ np.linalg.solve(s, innov))
+            d2 = position_nis(x, cov, d, p, floor=p.gate_floor_m)
             if d2 <= best_d2:
                 best, best_d2 = d, d2
         return best
@@ -193,7 +191,8 @@ class PersonTracker:
         last = self._history[-1] if self._history else None
         held = 1.0 if last is None else \
             1.0 + (last.inflation - 1.0) * math.exp(-(d.t - last.t) / p.inflate_time_s)
-        return max(held, position_nis(prior, d, p) / p.inflate_nis)
+        nis = position_nis(prior.x, prior.p, d, p)
+        return max(held, nis / p.inflate_nis) if math.isfinite(nis) else held
 
     def _start(self, d: PersonDetection) -> _Posterior:
         return _Posterior(d.t, d, self._filter.start(d))

@@ -216,18 +216,18 @@ class WalkerFilter:
         return Belief(xs, ps, mu / mu.sum())
 
 
-def position_nis(b: Belief, d: PersonDetection, p: TrackerParams) -> float:
-    """Squared Mahalanobis distance of ``d``'s position from ``b`` (belief and detection
-    covariance together; 2 degrees of freedom, so about 2 on average when the filter's
-    uncertainty is honest). 0 where it cannot be computed."""
-    x, cov = b.x, b.p
+def position_nis(x: np.ndarray, cov: np.ndarray, d: PersonDetection, p: TrackerParams,
+                 floor: float = MIN_STD) -> float:
+    """Squared Mahalanobis distance of ``d``'s position from the state ``x`` with covariance
+    ``cov`` (both covariances and ``floor`` m of tolerance together; 2 degrees of freedom, so
+    about 2 on average when the filter is honest); inf where it cannot be computed."""
     innov = np.array((d.x - x[0], d.y - x[1]))
-    s = cov[:2, :2] + position_cov(d, p) + MIN_STD ** 2 * np.eye(2)
+    s = cov[:2, :2] + position_cov(d, p) + floor ** 2 * np.eye(2)
     try:
         nis = float(innov @ np.linalg.solve(s, innov))
     except np.linalg.LinAlgError:
-        return 0.0
-    return nis if math.isfinite(nis) else 0.0
+        return math.inf
+    return nis if math.isfinite(nis) else math.inf
 
 
 def widened(cov: np.ndarray, k: float) -> np.ndarray:
