@@ -77,6 +77,19 @@ def unicycle_step(x: float, y: float, theta: float, v: float, omega: float, dt: 
 
 
 @jitable
+def base_step(x: float, y: float, theta: float, va: float, wa: float, v: float, omega: float,
+              tau: float, dt: float) -> tuple[float, float, float, float, float]:
+    """``(x, y, theta, va, wa)`` one period ``dt`` on for a differential-drive base whose
+    actual velocity ``(va, wa)`` follows the command ``(v, omega)`` through a first-order lag
+    ``tau`` (:func:`lagged`), moving along the arc of its mean velocity over the period (how
+    the simulated base moves; theta is not wrapped)."""
+    va, v_mean = lagged(va, v, tau, dt)
+    wa, w_mean = lagged(wa, omega, tau, dt)
+    x, y, theta = unicycle_step(x, y, theta, v_mean, w_mean, dt)
+    return x, y, theta, va, wa
+
+
+@jitable
 def offset_point(x: float, y: float, theta: float, d: float) -> tuple[float, float]:
     """Reference point R at distance ``d`` ahead of the wheel-axle centre (Eq. 2)."""
     return x + d * math.cos(theta), y + d * math.sin(theta)

@@ -34,11 +34,10 @@ from companion._jit import jitable, kernel
 from companion.control.limits import limit, limit_rate, reachable
 from companion.geometry import (
     ObstacleArrays,
+    base_step,
     clearance,
-    lagged,
     min_clearance,
     obstacle_arrays,
-    unicycle_step,
 )
 from companion.params import Params
 from companion.types import Obstacle, Pose
@@ -100,9 +99,7 @@ def stop_margins(x0: float, y0: float, th0: float, va0: float, wa0: float,
         margin = min_clearance(x, y, obstacles, robot.radius)
         left = tail
         while left >= 0:
-            va, vm = lagged(va, cv, tau, dt)
-            wa, wm = lagged(wa, cw, tau, dt)
-            x, y, th = unicycle_step(x, y, th, vm, wm, dt)
+            x, y, th, va, wa = base_step(x, y, th, va, wa, cv, cw, tau, dt)
             margin = min(margin, min_clearance(x, y, obstacles, robot.radius))
             if cv == 0.0 and cw == 0.0:
                 left -= 1

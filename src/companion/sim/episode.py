@@ -19,7 +19,7 @@ import numpy as np
 
 from companion.control.base import Controller
 from companion.errors import ConfigError
-from companion.geometry import clearance, lagged, unicycle_step, wrap_pi
+from companion.geometry import base_step, clearance, wrap_pi
 from companion.model import relative_state, robot_pose_at, slot_reference
 from companion.params import IDEAL, Params
 from companion.sim.faults import Fault, stalled
@@ -182,9 +182,7 @@ def episode_blocks(controller: Controller, person: PersonMotion, params: Params,
         if block.full() or k == n - 1:
             yield block.log()
             block = _Block(min(rows, n - k - 1))
-        va, v_mean = lagged(va, base[0], tau, dt)
-        wa, w_mean = lagged(wa, base[1], tau, dt)
-        x, y, th = unicycle_step(x, y, th, v_mean, w_mean, dt)
+        x, y, th, va, wa = base_step(x, y, th, va, wa, base[0], base[1], tau, dt)
         th = wrap_pi(th)
 
 

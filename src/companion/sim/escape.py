@@ -18,7 +18,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from companion.control.limits import limit
-from companion.geometry import lagged, unicycle_step
+from companion.geometry import base_step
 from companion.params import Params
 from companion.sim.episode import nearest_clearance
 from companion.types import Log, Obstacle
@@ -54,9 +54,7 @@ def escapable(log: Log, k: int, params: Params, obstacles: Sequence[Obstacle] = 
         clear = True
         for j in range(1, k1 - k0 + 1):
             command = limit(target, command, params)
-            va, vm = lagged(va, command[0], tau, dt)
-            wa, wm = lagged(wa, command[1], tau, dt)
-            x, y, th = unicycle_step(x, y, th, vm, wm, dt)
+            x, y, th, va, wa = base_step(x, y, th, va, wa, *command, tau, dt)
             if np.hypot(px[j] - x, py[j] - y) < contact \
                     or (obstacles and nearest_clearance(x, y, obstacles, r.radius) <= 0.0):
                 clear = False
