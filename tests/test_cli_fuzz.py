@@ -24,6 +24,12 @@ def test_fuzz_writes_one_row_per_episode_and_a_replay_gives_the_same_counts(tmp_
     assert len(report["failed"]) == len(failed)
     assert set(report["by_pair"]) == {"lqr/ideal", "pid/ideal"}
     assert "lqr/ideal" in out and "all" in out
+    rate = report["robot_failure_rate"]["ideal"]
+    robot = sum(fuzz.robot_failed({k: int(r[k]) for k in fuzz.COUNTS if not k.startswith("min_")})
+                for r in rows)
+    assert (rate["episodes"], rate["robot_failed_episodes"]) == (len(rows), robot)
+    assert rate["ci95"][0] <= rate["rate"] <= rate["ci95"][1]
+    assert f"ideal: the robot failed by its own doing in {robot} of {len(rows)} episodes" in out
     row = rows[0]
     code, out, _ = run(["fuzz", "--replay", row["seed"], "--controllers", "lqr", "--sensing",
                         "ideal", "--out", str(tmp_path)], capsys)

@@ -54,3 +54,28 @@ def test_obstacle_metrics():
     assert m["obstacle_collisions"] == 2       # two separate contacts
     log.columns["rho_ob"][0] = -0.1
     assert metrics.compute(log)["obstacle_collisions"] == 3
+
+
+@pytest.mark.parametrize("n", [1, 7, 379, 100_000])
+def test_binomial_interval_with_no_failure_is_the_rule_of_three_exactly(n):
+    """k = 0: the exact upper end solves (1 - p)^n = 0.025, the lower end is 0."""
+    lo, hi = metrics.binomial_interval(0, n)
+    assert lo == 0.0
+    assert hi == pytest.approx(1.0 - 0.025 ** (1.0 / n), rel=1e-9)
+
+
+@pytest.mark.parametrize("k, n", [(1, 10), (7, 379), (50, 100), (379, 379)])
+def test_binomial_interval_holds_the_estimate_and_narrows_with_more_episodes(k, n):
+    lo, hi = metrics.binomial_interval(k, n)
+    assert 0.0 <= lo <= k / n <= hi <= 1.0
+    lo10, hi10 = metrics.binomial_interval(10 * k, 10 * n)
+    assert hi10 - lo10 < hi - lo
+    # symmetric: k failures of n and n - k successes of n
+    lo_c, hi_c = metrics.binomial_interval(n - k, n)
+    assert (lo_c, hi_c) == pytest.approx((1.0 - hi, 1.0 - lo), abs=1e-12)
+
+
+def test_binomial_interval_refuses_counts_that_cannot_be():
+    with pytest.raises(ValueError, match="k=5, n=3"):
+        metrics.binomial_interval(5, 3)
+    assert metrics.binomial_interval(0, 0) == (0.0, 1.0)

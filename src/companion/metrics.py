@@ -232,3 +232,16 @@ class Running:
         values["finite"] = bool(self._finite and math.isfinite(rms["rmse_rho_m"])
                                 and math.isfinite(rms["rmse_alpha_rad"]))
         return values
+
+
+def binomial_interval(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
+    """Exact (Clopper-Pearson) interval of a proportion seen as ``k`` of ``n``: the rate of
+    rare failures from a sample of episodes, conservative at the small counts they give.
+    ``(0, 1)`` for ``n = 0``."""
+    if not 0 <= k <= n:
+        raise ValueError(f"binomial_interval: expected 0 <= k <= n, got k={k}, n={n}")
+    if n == 0:
+        return 0.0, 1.0
+    from scipy.stats import binomtest  # scipy only where it is used
+    ci = binomtest(k, n).proportion_ci(confidence_level=level, method="exact")
+    return float(ci.low), float(ci.high)

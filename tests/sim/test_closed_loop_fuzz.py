@@ -119,6 +119,9 @@ def test_a_collision_is_the_robots_doing_only_if_its_own_motion_closed_in_the_st
     # the person walks into a standing robot: a collision all the same, but the person's
     walked = fuzz.episode_counts(_log(np.zeros(11), np.linspace(0.8, 0.3, 11)), params)
     assert (walked["person_collisions"], walked["person_collisions_robot"]) == (1, 0)
+    assert fuzz.failed(walked) and not fuzz.robot_failed(walked)
+    assert fuzz.robot_failed(driven)
+    assert fuzz.totals([driven, walked])["robot_failed_episodes"] == 1
     # ... or into a robot that backs away more slowly than the person comes
     backed = fuzz.episode_counts(_log(np.linspace(0.0, -0.2, 11), np.linspace(0.8, 0.2, 11)),
                                  params)

@@ -293,10 +293,11 @@ def cmd_fuzz(args: argparse.Namespace) -> int:
         cases, counts = fuzz.run(episodes, workers, progress, base)
     pairs, total = fuzz.by_pair(cases, counts)
     failed = fuzz.failures(cases, counts)
+    rates = fuzz.failure_rates(cases, counts)
     report = {"steps_requested": steps, "seed": seed, "params": args.params,
               "controllers": list(controllers),
               "sensing": list(sensings), "wall_time_s": round(time.monotonic() - start, 1),
-              "total": total, "by_pair": pairs, "failed": failed}
+              "total": total, "by_pair": pairs, "robot_failure_rate": rates, "failed": failed}
     with Outputs(out, "fuzz") as stage:
         write_json(stage / "fuzz.json", report)
         write_csv(stage / "fuzz.csv", fuzz.COLUMNS, fuzz.csv_rows(cases, counts))
@@ -307,6 +308,7 @@ def cmd_fuzz(args: argparse.Namespace) -> int:
               f"{f['sensing']}")
     print(f"{len(failed)} of {len(cases)} episodes failed (a collision, a robot-caused "
           f"protective violation or a non-finite value); {report['wall_time_s']:g} s")
+    print(fuzz.rates_text(rates))
     print(f"wrote fuzz.json, fuzz.csv in {out}")
     return 1 if failed else 0
 

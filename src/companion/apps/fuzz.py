@@ -7,6 +7,7 @@ import dataclasses
 from collections.abc import Callable, Sequence
 from functools import partial
 
+from companion import metrics
 from companion.apps.args import UsageError
 from companion.apps.flags import FLAGS
 from companion.control import CONTROLLERS
@@ -82,6 +83,30 @@ def by_pair(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> tuple[dict[st
     for c, n in zip(cases, counts):
         groups.setdefault(f"{c.controller}/{c.sensing}", []).append(n)
     return {pair: fuzz.totals(rows) for pair, rows in groups.items()}, fuzz.totals(counts)
+
+
+def failure_rates(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> dict[str, dict]:
+    """Per sensing profile: the share of episodes the robot failed by its own doing
+    (:func:`companion.sim.fuzz.robot_failed`) with its exact 95 % interval. Failures are
+    rare and clumped in a few episodes, so a difference between two runs means something only
+    where these intervals part."""
+    groups: dict[str, list[dict]] = {}
+    for c, n in zip(cases, counts):
+        groups.setdefault(c.sensing, []).append(n)
+    out = {}
+    for sensing, rows in groups.items():
+        k = sum(fuzz.robot_failed(r) for r in rows)
+        lo, hi = metrics.binomial_interval(k, len(rows))
+        out[sensing] = {"episodes": len(rows), "robot_failed_episodes": k,
+                        "rate": k / len(rows), "ci95": [lo, hi]}
+    return out
+
+
+def rates_text(rates: dict[str, dict]) -> str:
+    return "\n".join(
+        f"{sensing}: the robot failed by its own doing in {r['robot_failed_episodes']} of "
+        f"{r['episodes']} episodes ({r['rate']:.1%}, 95 % interval {r['ci95'][0]:.1%} to "
+        f"{r['ci95'][1]:.1%})" for sensing, r in rates.items())
 
 
 def failures(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> list[dict]:

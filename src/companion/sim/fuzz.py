@@ -276,12 +276,22 @@ def failed(counts: dict) -> bool:
                 or counts["violations"] or counts["nonfinite_steps"])
 
 
+def robot_failed(counts: dict) -> bool:
+    """True for an episode in which the robot failed by its own doing: a robot-caused
+    collision or protective violation, an obstacle collision or a non-finite value (contacts
+    the person caused aside)."""
+    return bool(counts["person_collisions_robot"] or counts["obstacle_collisions"]
+                or counts["violations"] or counts["nonfinite_steps"])
+
+
 def totals(rows: Sequence[dict]) -> dict:
-    """Sums of the counts over ``rows`` (minima for the distances) and the episode count."""
+    """Sums of the counts over ``rows`` (minima for the distances), the episode count and the
+    numbers of :func:`failed` and :func:`robot_failed` episodes."""
     out: dict = {"episodes": len(rows)}
     for key in COUNTS:
         values = [r[key] for r in rows]
         out[key] = (min(values, default=math.nan) if key.startswith("min_")
                     else int(sum(values)))
     out["failed_episodes"] = sum(failed(r) for r in rows)
+    out["robot_failed_episodes"] = sum(robot_failed(r) for r in rows)
     return out
