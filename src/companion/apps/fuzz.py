@@ -77,12 +77,19 @@ def csv_rows(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> list[tuple]:
             for c, n in zip(cases, counts)]
 
 
-def by_pair(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> tuple[dict[str, dict], dict]:
-    """Totals per "controller/sensing", in the order the pairs first appear, and of all."""
+def grouped(cases: Sequence[fuzz.Case], counts: Sequence[dict],
+            key: Callable[[fuzz.Case], str]) -> dict[str, dict]:
+    """:func:`companion.sim.fuzz.totals` per ``key`` of the case, in order of appearance."""
     groups: dict[str, list[dict]] = {}
     for c, n in zip(cases, counts):
-        groups.setdefault(f"{c.controller}/{c.sensing}", []).append(n)
-    return {pair: fuzz.totals(rows) for pair, rows in groups.items()}, fuzz.totals(counts)
+        groups.setdefault(key(c), []).append(n)
+    return {name: fuzz.totals(rows) for name, rows in groups.items()}
+
+
+def by_pair(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> tuple[dict[str, dict], dict]:
+    """Totals per "controller/sensing", in the order the pairs first appear, and of all."""
+    return (grouped(cases, counts, lambda c: f"{c.controller}/{c.sensing}"),
+            fuzz.totals(counts))
 
 
 def failure_rates(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> dict[str, dict]:
@@ -90,15 +97,12 @@ def failure_rates(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> dict[st
     (:func:`companion.sim.fuzz.robot_failed`) with its exact 95 % interval. Failures are
     rare and clumped in a few episodes, so a difference between two runs means something only
     where these intervals part."""
-    groups: dict[str, list[dict]] = {}
-    for c, n in zip(cases, counts):
-        groups.setdefault(c.sensing, []).append(n)
     out = {}
-    for sensing, rows in groups.items():
-        k = sum(fuzz.robot_failed(r) for r in rows)
-        lo, hi = metrics.binomial_interval(k, len(rows))
-        out[sensing] = {"episodes": len(rows), "robot_failed_episodes": k,
-                        "rate": k / len(rows), "ci95": [lo, hi]}
+    for sensing, t in grouped(cases, counts, lambda c: c.sensing).items():
+        k, n = t["robot_failed_episodes"], t["episodes"]
+        lo, hi = metrics.binomial_interval(k, n)
+        out[sensing] = {"episodes": n, "robot_failed_episodes": k, "rate": k / n,
+                        "ci95": [lo, hi]}
     return out
 
 
