@@ -85,7 +85,11 @@ def test_a_bad_params_file_for_fuzz_names_the_file_and_key(tmp_path, capsys):
     (["--seed", "-1"], "--seed: expected 0 <= N <= 2**63-1, got '-1'"),
     (["--controllers", "lqr,foo"], "--controllers: expected distinct names from lqr, lqr-paper"),
     (["--controllers", "lqr,lqr"], "--controllers: expected distinct names"),
-    (["--sensing", "noisy"], "--sensing: expected distinct names from ideal, realistic"),
+    (["--sensing", "noisy"], "--sensing: expected ideal or realistic or a .toml file, got "
+     "'noisy'"),
+    (["--sensing", "ideal,,realistic"], "--sensing: expected distinct profile names or .toml "
+     "files separated by commas"),
+    (["--sensing", "ideal,ideal"], "--sensing: expected distinct profile names"),
     (["--workers", "0"], "--workers: expected 1 <= N <= 256, got '0'"),
     (["--replay", "3"], "--replay: give the episode's controller and sensing"),
     (["--replay", "-3", "--controllers", "lqr", "--sensing", "ideal"], "--replay: expected 0 "
@@ -97,3 +101,43 @@ def test_bad_fuzz_flags_exit_2_with_one_line(argv, message, capsys, tmp_path):
     assert message in err
     assert err.count("\n") == 1
     assert not list(tmp_path.iterdir())
+
+
+def test_fuzz_takes_a_sensing_file_and_replays_its_episodes(tmp_path, capsys):
+    """--sensing takes TOML files of sensing keys beside the profile names, as the other
+    commands do: a base with lag and an exact person here. The file's path names the
+    profile in fuzz.csv, and a replay with it gives the same counts."""
+    lag = tmp_path / "lag.toml"
+    lag.write_text("person_rate_hz = inf\nperson_position_noise_m = 0.0\n"
+                   "person_latency_s = 0.0\nperson_dropout = 0.0\nactuator_tau_s = 0.2\n")
+    code, out, _ = run(["fuzz", "--steps", "1500", "--controllers", "pid", "--sensing",
+                        f"ideal,{lag}", "--workers", "1", "--out", str(tmp_path / "o")], capsys)
+    with open(tmp_path / "o" / "fuzz.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["sensing"] for r in rows][:2] == ["ideal", str(lag)]
+    report = json.loads((tmp_path / "o" / "fuzz.json").read_text())
+    assert set(report["robot_failure_rate"]) == {"ideal", str(lag)}
+    lagged = rows[1]
+    code, out, _ = run(["fuzz", "--replay", lagged["seed"], "--controllers", "pid",
+                        "--sensing", str(lag), "--out", str(tmp_path / "r")], capsys)
+    episode = json.loads((tmp_path / "r" / "episode.json").read_text())
+    assert episode["case"]["sensing"] == str(lag)
+    for key in fuzz.COUNTS:
+        assert float(lagged[key]) == pytest.approx(episode["counts"][key], rel=1e-9)
+    # the same seed under ideal sensing is another episode of the same world: the lag shows
+    code, _, _ = run(["fuzz", "--replay", lagged["seed"], "--controllers", "pid", "--sensing",
+                      "ideal", "--out", str(tmp_path / "i")], capsys)
+    plain = json.loads((tmp_path / "i" / "episode.json").read_text())["counts"]
+    assert plain["steps"] == episode["counts"]["steps"]
+    assert plain != episode["counts"]
+
+
+def test_a_bad_sensing_file_for_fuzz_names_the_file_and_key(tmp_path, capsys):
+    bad = tmp_path / "s.toml"
+    bad.write_text("actuator_tau_s = -1\n")
+    code, _, err = run(["fuzz", "--sensing", f"ideal,{bad}", "--out", str(tmp_path / "o")],
+                       capsys)
+    assert code == 2
+    assert f"--sensing: {bad}: actuator_tau_s: expected a finite number >= 0" in err
+    assert err.count("\n") == 1
+    assert not (tmp_path / "o").exists()

@@ -16,7 +16,7 @@ from companion.config import MAX_MAGNITUDE, load_toml
 from companion.control import make_controller
 from companion.errors import CompanionError, ConfigError
 from companion.geometry import wrap_2pi
-from companion.params import Params, load_sensing, params_from_mapping
+from companion.params import Params, SensingParams, load_sensing, params_from_mapping
 from companion.sim.recorded import load_person_csv
 from companion.sim.scenario import Scenario, load_scenario
 from companion.types import Pose
@@ -101,12 +101,16 @@ def params_arg(args: argparse.Namespace) -> Params:
 
 def with_sensing(params: Params, args: argparse.Namespace) -> Params:
     sensing = getattr(args, "sensing", None)
-    if sensing is None:
-        return params
+    return params if sensing is None else params.replace(sensing=sensing_arg(sensing))
+
+
+def sensing_arg(name: str) -> SensingParams:
+    """The sensing of a ``--sensing`` profile name or TOML file; an error names the flag
+    and the name, or the file and its key."""
     try:
-        return params.replace(sensing=load_sensing(sensing))
+        return load_sensing(name)
     except ConfigError as exc:
-        raise UsageError(f"--sensing {sensing}: {exc}") from None
+        raise UsageError(f"--sensing: {exc}") from None
 
 
 def overrides(args: argparse.Namespace) -> dict:

@@ -164,8 +164,9 @@ def parser() -> argparse.ArgumentParser:
                          "(default 0)")
     fz.add_argument("--controllers", metavar="A,B", help=f"controllers (default all: "
                     f"{','.join(CONTROLLERS)})")
-    fz.add_argument("--sensing", metavar="A,B", help="sensing profiles (default: "
-                    "ideal,realistic)")
+    fz.add_argument("--sensing", metavar="A,B", help="sensing profiles: ideal, realistic or "
+                    "TOML files of sensing keys (docs/sensing.md), separated by commas "
+                    "(default: ideal,realistic)")
     fz.add_argument("--replay", type=int, metavar="SEED", help="run the episode of this seed "
                     f"({rng('--replay', 'SEED')}; a row of fuzz.csv) with one --controllers and "
                     "one --sensing, and write its log.csv and episode.json")

@@ -267,7 +267,8 @@ def cmd_soak(args: argparse.Namespace) -> int:
 
 
 def cmd_fuzz(args: argparse.Namespace) -> int:
-    controllers, sensings = fuzz.selection(args)
+    controllers, profiles = fuzz.selection(args)
+    sensings = tuple(profiles)
     base = file_params(args)
     out = output_dir(Path(args.out or Path("out") / "fuzz"))
     if args.replay is not None:
@@ -275,7 +276,7 @@ def cmd_fuzz(args: argparse.Namespace) -> int:
             raise UsageError("--replay: give the episode's controller and sensing as one "
                              "--controllers NAME and one --sensing NAME (fuzz.csv has them)")
         seed = int_arg(args.replay, "--replay", "SEED")
-        case, counts, log = fuzz.replay(seed, controllers[0], sensings[0], base)
+        case, counts, log = fuzz.replay(seed, controllers[0], sensings[0], base, profiles)
         with Outputs(out, "fuzz-replay") as stage:
             write_log(stage / "log.csv", log)
             write_json(stage / "episode.json", {"case": vars(case), "counts": counts})
@@ -290,7 +291,7 @@ def cmd_fuzz(args: argparse.Namespace) -> int:
           f"{', '.join(sensings)} sensing")
     episodes = fuzz.plan(steps, seed, controllers, sensings)
     with progress_bar(len(episodes), "episode") as progress:
-        cases, counts = fuzz.run(episodes, workers, progress, base)
+        cases, counts = fuzz.run(episodes, workers, progress, base, profiles)
     pairs, total = fuzz.by_pair(cases, counts)
     failed = fuzz.failures(cases, counts)
     rates = fuzz.failure_rates(cases, counts)

@@ -4,14 +4,14 @@ its table, fuzz.json and fuzz.csv, and the replay of one episode."""
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from functools import partial
 
 from companion import metrics
-from companion.apps.args import UsageError
+from companion.apps.args import UsageError, sensing_arg
 from companion.apps.flags import FLAGS
 from companion.control import CONTROLLERS
-from companion.params import PROFILES, Params
+from companion.params import PROFILES, Params, SensingParams
 from companion.sim import fuzz
 from companion.sim.runner import WithSpec, run_many, run_one
 from companion.types import Log
@@ -41,33 +41,41 @@ def bounded_arg(value: int, low: int, high: int, flag: str) -> int:
     return value
 
 
-def selection(args) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """The controllers and sensing profiles of --controllers and --sensing."""
-    return (names_arg(args.controllers, tuple(CONTROLLERS), "--controllers"),
-            names_arg(args.sensing, tuple(PROFILES), "--sensing"))
+def selection(args) -> tuple[tuple[str, ...], dict[str, SensingParams]]:
+    """The controllers of --controllers, and the sensing of --sensing by name: profile
+    names or TOML files of sensing keys (docs/sensing.md), separated by commas."""
+    controllers = names_arg(args.controllers, tuple(CONTROLLERS), "--controllers")
+    if args.sensing is None:
+        return controllers, dict(PROFILES)
+    names = tuple(n.strip() for n in args.sensing.split(","))
+    if not all(names) or len(set(names)) != len(names):
+        raise UsageError(f"--sensing: expected distinct profile names or .toml files "
+                         f"separated by commas, got {args.sensing!r}")
+    return controllers, {name: sensing_arg(name) for name in names}
 
 
 plan, failed = fuzz.plan, fuzz.failed
 
 
 def run(episodes: Sequence[tuple[int, str, str]], workers: int | None,
-        progress: Callable[[int], None] | None = None, base: Params | None = None
+        progress: Callable[[int], None] | None = None, base: Params | None = None,
+        profiles: Mapping[str, SensingParams] = PROFILES
         ) -> tuple[list[fuzz.Case], list[dict]]:
     """Draw and run the ``episodes`` of :func:`plan` (on the parameters ``base``, default
-    Table 1's); their cases and counts, in order."""
+    Table 1's, and the sensing ``profiles`` by name); their cases and counts, in order."""
     base = base or Params()
-    drawn = [fuzz.draw(*episode, base=base) for episode in episodes]
+    drawn = [fuzz.draw(*episode, base=base, profiles=profiles) for episode in episodes]
     counts = run_many([spec for _, spec in drawn], workers,
                       summarize=WithSpec(partial(fuzz.spec_counts, params=base)),
                       progress=progress)
     return [case for case, _ in drawn], counts
 
 
-def replay(seed: int, controller: str, sensing: str, base: Params | None = None
-           ) -> tuple[fuzz.Case, dict, Log]:
+def replay(seed: int, controller: str, sensing: str, base: Params | None = None,
+           profiles: Mapping[str, SensingParams] = PROFILES) -> tuple[fuzz.Case, dict, Log]:
     """One episode again: its case, counts and log."""
     base = base or Params()
-    case, spec = fuzz.draw(seed, controller, sensing, base)
+    case, spec = fuzz.draw(seed, controller, sensing, base, profiles)
     log = run_one(spec)
     return case, fuzz.episode_counts(log, base, spec.obstacles), log
 
@@ -127,15 +135,16 @@ def table(pairs: dict[str, dict], total: dict) -> str:
     """The printed table: per pair and in all, collisions (robot-caused, and of the person's
     those no command could escape), protective steps (robot-caused outside walk-throughs,
     of them from the estimate, and during walk-throughs), statuses and the closest approach."""
-    head = (f"{'controller/sensing':22s} {'episodes':>8s} {'steps':>9s} {'person':>6s} "
+    w = max(22, *(len(name) for name in pairs))   # a sensing file's path can be long
+    head = (f"{'controller/sensing':{w}s} {'episodes':>8s} {'steps':>9s} {'person':>6s} "
             f"{'(rob.)':>6s} {'(unesc.)':>8s} {'obstacle':>8s} {'inside':>6s} {'robot':>5s} "
             f"{'(est.)':>6s} {'(walk)':>6s} {'nonfin':>6s} {'ok':>6s} {'degr.':>6s} "
             f"{'stop':>6s} {'closest':>7s}")
-    lines = [f"{'':22s} {'':>8s} {'':>9s} {'collisions':>31s} {'protective steps':>28s}", head]
+    lines = [f"{'':{w}s} {'':>8s} {'':>9s} {'collisions':>31s} {'protective steps':>28s}", head]
     for name, t in [*pairs.items(), ("all", total)]:
         n = max(t["steps"], 1)
         lines.append(
-            f"{name:22s} {t['episodes']:8d} {t['steps']:9d} {t['person_collisions']:6d} "
+            f"{name:{w}s} {t['episodes']:8d} {t['steps']:9d} {t['person_collisions']:6d} "
             f"{t['person_collisions_robot']:6d} {t['person_collisions_unescapable']:8d} "
             f"{t['obstacle_collisions']:8d} {t['protective_steps']:6d} {t['violations']:5d} "
             f"{t['violations_estimate']:6d} {t['violations_walkthrough']:6d} "

@@ -158,7 +158,7 @@ def load_sensing(name_or_path: str) -> SensingParams:
     if name_or_path in PROFILES:
         return PROFILES[name_or_path]
     if not name_or_path.endswith(".toml"):
-        raise ConfigError(f"--sensing: expected {' or '.join(PROFILES)} or a .toml file, got "
+        raise ConfigError(f"expected {' or '.join(PROFILES)} or a .toml file, got "
                           f"{name_or_path!r}")
     return build(SensingParams, load_toml(name_or_path), prefix=f"{name_or_path}: ")
 

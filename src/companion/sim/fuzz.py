@@ -14,12 +14,12 @@ docstring and in docs/safety.md.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from companion.params import PROFILES, Formation, Params
+from companion.params import PROFILES, Formation, Params, SensingParams
 from companion.sim.episode import start_in_slot
 from companion.sim.escape import escapable
 from companion.sim.runner import EpisodeSpec
@@ -101,17 +101,18 @@ def _start(rng: np.random.Generator, kind: str, params: Params
     return Pose(r * math.cos(phi), r * math.sin(phi), float(heading)), (v, w), room
 
 
-def draw(seed: int, controller: str, sensing: str, base: Params | None = None
-         ) -> tuple[Case, EpisodeSpec]:
-    """The episode of ``seed`` for ``controller`` and ``sensing`` (a profile name): the
-    world and the walk depend on the seed alone, so a seed can be replayed with any pair."""
+def draw(seed: int, controller: str, sensing: str, base: Params | None = None,
+         profiles: Mapping[str, SensingParams] = PROFILES) -> tuple[Case, EpisodeSpec]:
+    """The episode of ``seed`` for ``controller`` and ``sensing`` (a name of ``profiles``):
+    the world and the walk depend on the seed alone, so a seed can be replayed with any
+    pair."""
     base = base or Params()
     rng = np.random.default_rng(seed)
     duration = _steps(rng, base.dt) * base.dt
     drawn = float(rng.uniform(*DISTANCE))
     bearing = float(rng.uniform(0.0, 2.0 * math.pi))
     distance = feasible_distance(drawn, bearing, base)
-    params = base.replace(formation=Formation(distance, bearing), sensing=PROFILES[sensing])
+    params = base.replace(formation=Formation(distance, bearing), sensing=profiles[sensing])
     heading = float(rng.uniform(-math.pi, math.pi))
     kind = START_KINDS[int(rng.integers(len(START_KINDS)))]
     start, velocity, room = _start(rng, kind, params)
