@@ -192,20 +192,29 @@ def test_short_fuzz_no_obstacle_collision_and_ideal_sensing_is_never_the_robots_
     assert sum(n["violations"] + n["person_collisions_robot"] for n in ideal) == 0
 
 
+def test_short_fuzz_with_ideal_sensing_the_walker_never_reaches_the_robot(short_run):
+    """Rule 3 bounds the robot's own approach outside the protective distance and leaves a
+    person's approach to the evasive check: backing off along the line to the walker drove
+    the robot into its path (the 1,000,000-step run: 15 ideal contacts before, 1 after)."""
+    cases, counts = short_run
+    ideal = [n for c, n in zip(cases, counts) if c.sensing == "ideal"]
+    assert sum(n["person_collisions"] for n in ideal) == 0
+
+
 # Measured 2026-11-26 (docs/safety.md, "Closed-loop fuzz"): the short run's failing episodes
 # are seed 21 (pid/realistic: the robot drove into a person who started to walk towards it
-# faster than the 10 Hz detections showed; 3 robot-caused steps, none of them closing on the
-# estimate too) and seeds 10, 22, 24, where the walker walked into the robot (each
-# escapable in hindsight: sim.escape).
-@pytest.mark.xfail(strict=True, reason="seed 21 pid/realistic: 3 robot-caused steps inside "
+# faster than the 10 Hz detections showed; 2 robot-caused steps, both closing on a person
+# the estimate put elsewhere) and seeds 10 and 22, where the walker walked into the robot
+# (each escapable in hindsight: sim.escape).
+@pytest.mark.xfail(strict=True, reason="seed 21 pid/realistic: 2 robot-caused steps inside "
                    "the protective distance, the estimate lagging a person who started to walk")
 def test_short_fuzz_no_robot_caused_violation(short_run):
     cases, counts = short_run
     assert [c.seed for c, n in zip(cases, counts) if n["violations"]] == []
 
 
-@pytest.mark.xfail(strict=True, reason="person collisions in seeds 10, 21, 22, 24 (in all "
-                   "but 21 the walker walked into the robot)")
+@pytest.mark.xfail(strict=True, reason="person collisions in seeds 10, 21, 22 (in all but 21 "
+                   "the walker walked into the robot)")
 def test_short_fuzz_no_collision(short_run):
     cases, counts = short_run
     bad = [(c.seed, c.controller, c.sensing) for c, n in zip(cases, counts)

@@ -12,9 +12,11 @@ The safety supervisor applies them to the controller's target in this order (doc
    side) and a command that would come within 5 cm of the protective distance or of an
    obstacle is replaced by the closest safe one of a grid.
 3. **Braking bound** (:func:`braking_bound`): inside ``protective_distance`` the robot may only
-   turn or move away; outside it, and towards obstacles, the approach speed is what braking at
-   the rate limit can still stop in time, counting one period of delay and the distance the
-   actuator lag carries the robot on at its measured speed.
+   turn or move away; outside it, and towards obstacles, the robot's own approach speed is
+   what braking at the rate limit can still stop in time, counting one period of delay and
+   the distance the actuator lag carries the robot on at its measured speed. A person's own
+   approach outside the zone is rule 2's to answer: backing off along the line to the person
+   drove the robot into the path of people passing by (docs/safety.md).
 4. **Stop path** (:func:`companion.control.stopping.stop_path_target`): last, on the command
    the others leave, so it checks what is sent. The robot must still be able to brake to a
    stop along the path it turns along without coming within ``keepout.contact_margin`` of
@@ -190,7 +192,7 @@ def person_interval(robot: Pose, person: PersonState, params: Params, reasons: l
     tau = params.sensing.actuator_tau_s
     delay = reaction_delay(params) - (0.0 if actual is None else tau)
     allowed = braking_speed(gap - lag_travel(robot, actual, nx, ny, tau), net, delay)
-    return speed_bound(robot.theta, nx, ny, max(approach, 0.0), allowed)
+    return speed_bound(robot.theta, nx, ny, 0.0, allowed)   # the robot's own approach
 
 
 def obstacle_bounds(robot: Pose, obstacles: Sequence[Obstacle], params: Params,
