@@ -115,6 +115,7 @@ def failure_rates(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> dict[st
 
 
 def rates_text(rates: dict[str, dict]) -> str:
+    """The lines :func:`failure_rates` prints, one per sensing profile."""
     return "\n".join(
         f"{sensing}: the robot failed by its own doing in {r['robot_failed_episodes']} of "
         f"{r['episodes']} episodes ({r['rate']:.1%}, 95 % interval {r['ci95'][0]:.1%} to "
@@ -135,7 +136,7 @@ def table(pairs: dict[str, dict], total: dict) -> str:
     """The printed table: per pair and in all, collisions (robot-caused, and of the person's
     those no command could escape), protective steps (robot-caused outside walk-throughs,
     of them from the estimate, and during walk-throughs), statuses and the closest approach."""
-    w = max(22, *(len(name) for name in pairs))   # a sensing file's path can be long
+    w = max([22, *map(len, pairs)])   # a sensing file's path can be long
     head = (f"{'controller/sensing':{w}s} {'episodes':>8s} {'steps':>9s} {'person':>6s} "
             f"{'(rob.)':>6s} {'(unesc.)':>8s} {'obstacle':>8s} {'inside':>6s} {'robot':>5s} "
             f"{'(est.)':>6s} {'(walk)':>6s} {'nonfin':>6s} {'ok':>6s} {'degr.':>6s} "
