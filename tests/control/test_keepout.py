@@ -85,6 +85,23 @@ def test_braking_bound_stops_at_the_protective_distance_and_lets_the_robot_leave
     assert "protective_zone" in reasons
 
 
+def test_outside_the_zone_the_braking_bound_limits_the_robots_own_approach_only():
+    """A person walking at the robot is the evasive check's to answer: outside the
+    protective distance the bound does not make the robot back off along the line to it
+    (that drove it into the path of people passing by), and the robot's own approach is
+    bounded as for a standing person. Inside the zone it must still move away as fast as
+    the person comes."""
+    standing = PersonState(0.0, 0.0, math.pi, 0.0, 0.0)
+    coming = PersonState(0.0, 0.0, math.pi, 1.2, 0.0)      # walks at the robot at 1.2 m/s
+    robot = Pose(-1.2, 0.0, 0.0)                            # facing the person, 1.2 m away
+    assert braking_bound(0.0, robot, coming, (), P, []) == 0.0
+    assert braking_bound(1.5, robot, coming, (), P, []) == \
+        pytest.approx(braking_bound(1.5, robot, standing, (), P, []), abs=1e-12)
+    assert 0.0 < braking_bound(1.5, robot, coming, (), P, []) < 1.5
+    inside = Pose(-0.4, 0.0, 0.0)
+    assert braking_bound(0.0, inside, coming, (), P, []) == pytest.approx(-1.2)
+
+
 def test_an_uncertain_person_is_kept_farther_away_and_the_lag_counts_as_reaction_time():
     person = PersonState(0.0, 0.0, 0.0, 0.0, 0.0)
     pose, grow = Pose(-3.0, 0.0, 0.0), 0.15
