@@ -2,9 +2,9 @@
 
     python bench/sensing.py [--every N]
 
-Runs each ETH/UCY track of ../shared/data/pedestrians (mean speed > 0.6 m/s, >= 15 s), robot
-starting in its slot on the left and on the right, with every controller, once with the
-``ideal`` and once with the ``realistic`` sensing profile (about 10 minutes on 2 cores;
+Runs each ETH/UCY track shipped with companion (companion/data/eth_ucy; mean speed > 0.6 m/s,
+>= 15 s), robot starting in its slot on the left and on the right, with every controller, once
+with the ``ideal`` and once with the ``realistic`` sensing profile (about 10 minutes on 2 cores;
 ``--every 3`` takes every third track). Prints per profile and controller the median and
 90th percentile of the per-run RMSE rho, the median RMSE alpha and the closest approach to
 the true person; the LQR against each baseline on the same runs; and the realistic profile's

@@ -1,28 +1,29 @@
 """ETH/UCY pedestrian tracks: loader, selection, and the real-walking acceptance test.
 
 The acceptance test drives the target person with real human walking (ETH "hotel", UCY
-"zara1" and "students003"; credit: companion.data.pedestrians.CREDIT) and is skipped when
-the data directory (../shared/data/pedestrians next to the repository, or
-$COMPANION_PEDESTRIANS) is not found.
+"zara1" and "students003"; credit: companion.data.pedestrians.CREDIT), shipped with the
+package (companion/data/eth_ucy).
 """
 
 from __future__ import annotations
 
 import math
-import os
 import statistics
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+import companion
 from companion.apps.pedestrians import evaluate
 from companion.data.pedestrians import (
     CREDIT,
     ENV_VAR,
+    PACKAGED_DIR,
     SCENES,
     Track,
     default_data_dir,
+    load_scene,
     load_scenes,
     load_tracks,
     select_tracks,
@@ -117,17 +118,17 @@ def test_env_var_overrides_data_dir(tmp_path, monkeypatch):
         default_data_dir()
 
 
-def test_data_dir_found_next_to_repository(tmp_path, monkeypatch):
+def test_the_data_ship_with_the_package(monkeypatch):
+    """A fresh clone has the tracks: the default folder is the package's own copy, with the
+    three scenes and the README that carries the credit."""
     monkeypatch.delenv(ENV_VAR, raising=False)
-    data = tmp_path / "shared" / "data" / "pedestrians"
-    data.mkdir(parents=True)
-    inside_repo = tmp_path / "main" / "src" / "companion"
-    inside_repo.mkdir(parents=True)
-    assert default_data_dir([inside_repo]) == data.resolve()
-    assert default_data_dir([tmp_path / "main", inside_repo]) == data.resolve()
-    data.rmdir()
-    found = default_data_dir([inside_repo])
-    assert found is None or tmp_path.resolve() not in found.parents
+    root = default_data_dir()
+    assert root == PACKAGED_DIR and Path(companion.__file__).parent in root.parents
+    for scene in SCENES.values():
+        assert (root / scene).stat().st_size > 100_000
+    readme = (root / "README.md").read_text()
+    assert "Pellegrini" in readme and "Crowds by example" in readme
+    assert len(load_scene("zara1")) == 148
 
 
 def test_credit_names_both_data_sets():
@@ -151,11 +152,6 @@ LIMITS = {               # median RMSE rho (m), median RMSE alpha (rad)
 @pytest.fixture(scope="module")
 def walking_tracks() -> list[Track]:
     data_dir = default_data_dir()
-    if data_dir is None and os.environ.get("CI"):
-        pytest.fail("pedestrian data not found in CI: expected ../shared/data/pedestrians")
-    if data_dir is None:
-        pytest.skip("pedestrian data not found: expected ../shared/data/pedestrians next to "
-                    f"the repository, or set {ENV_VAR}")
     tracks = select_tracks(load_scenes(data_dir, SCENES))
     assert tracks, f"no walking tracks in {data_dir}"
     return tracks[::4]

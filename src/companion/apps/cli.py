@@ -122,7 +122,7 @@ def parser() -> argparse.ArgumentParser:
     pd = sub.add_parser("pedestrians", help="every controller beside real walkers (ETH/UCY), ideal "
                         "or realistic sensing (docs/sensing.md)")
     pd.add_argument("--data", metavar="DIR", help="folder of the ETH/UCY files (default: "
-                    "../shared/data/pedestrians or $COMPANION_PEDESTRIANS)")
+                    "the copy shipped with companion, or $COMPANION_PEDESTRIANS)")
     pd.add_argument("--controller", default="lqr", choices=[*CONTROLLERS, "all"],
                     help="a controller, or all of them on the same runs (default lqr)")
     pd.add_argument("--side", default="both", choices=[*SIDES, "both"],

@@ -1,8 +1,8 @@
 """Real pedestrian walking tracks (ETH and UCY data sets) as target persons.
 
-The files live outside the repository, in ``../shared/data/pedestrians`` (see its README.md and
-:func:`default_data_dir`). Each scene file has one observation per line, tab separated:
-``frame ped_id x y`` (frames and ids written as floats, x and y in metres); time is
+The files ship inside the package, in ``companion/data/eth_ucy`` (its README.md gives their
+format and credit; :func:`default_data_dir`). Each scene file has one observation per line,
+tab separated: ``frame ped_id x y`` (frames and ids written as floats, x and y in metres); time is
 ``frame / 25`` s and each pedestrian has one row every 0.4 s. Every scene has its own frame.
 
 Typical use: ``tracks = select_tracks(load_scenes())``;
@@ -27,8 +27,8 @@ from companion.io import parse_number
 FRAME_RATE = 25.0
 #: Environment variable that overrides :func:`default_data_dir`.
 ENV_VAR = "COMPANION_PEDESTRIANS"
-#: Location of the data relative to an ancestor of the package or of the working directory.
-RELATIVE_DIR = Path("shared", "data", "pedestrians")
+#: The copy of the data shipped with the package (about 1.1 MB, with its README and credit).
+PACKAGED_DIR = Path(__file__).with_name("eth_ucy")
 #: Scene name -> file inside the data directory.
 SCENES = {
     "hotel": Path("hotel", "biwi_hotel.txt"),
@@ -72,15 +72,9 @@ class Track:
         return float(np.sum(np.hypot(np.diff(self.x), np.diff(self.y)))) / self.duration
 
 
-def default_data_dir(search_from: Iterable[str | Path] | None = None) -> Path | None:
-    """The pedestrian data directory, or None if it is not found.
-
-    The environment variable ``COMPANION_PEDESTRIANS``, if set and not empty, wins. Otherwise
-    the first existing ``<ancestor>/shared/data/pedestrians`` is returned, trying each
-    directory of ``search_from`` and its ancestors in turn (default: this package's directory,
-    then the working directory); for a checkout at ``<root>/main`` that is
-    ``<root>/shared/data/pedestrians``, i.e. ``../shared/data/pedestrians`` relative to the
-    repository.
+def default_data_dir() -> Path:
+    """The pedestrian data directory: ``$COMPANION_PEDESTRIANS`` if set and not empty (a copy
+    of the files elsewhere), else the copy shipped with the package (:data:`PACKAGED_DIR`).
 
     Raises
     ------
@@ -93,15 +87,7 @@ def default_data_dir(search_from: Iterable[str | Path] | None = None) -> Path | 
         if not path.is_dir():
             raise DataError(f"{ENV_VAR}={override}: not a directory")
         return path
-    if search_from is None:
-        search_from = (Path(__file__).parent, Path.cwd())
-    for start in search_from:
-        start = Path(start).resolve()
-        for ancestor in (start, *start.parents):
-            candidate = ancestor / RELATIVE_DIR
-            if candidate.is_dir():
-                return candidate
-    return None
+    return PACKAGED_DIR
 
 
 def load_tracks(path: str | Path, scene: str | None = None) -> dict[int, Track]:
@@ -205,13 +191,7 @@ def load_scenes(data_dir: str | Path | None = None,
 
 
 def _resolve_dir(data_dir: str | Path | None) -> Path:
-    if data_dir is not None:
-        return Path(data_dir)
-    found = default_data_dir()
-    if found is None:
-        raise DataError(f"pedestrian data not found: expected a directory "
-                        f"{RELATIVE_DIR} next to the repository, or set {ENV_VAR}")
-    return found
+    return Path(data_dir) if data_dir is not None else default_data_dir()
 
 
 def select_tracks(tracks: Mapping[int, Track] | Iterable[Track], min_mean_speed: float = 0.6,
