@@ -1,7 +1,6 @@
 """Animations: `companion run --animate FILE` and the helpers behind fig4.gif."""
 
 import dataclasses
-import json
 
 import numpy as np
 import pytest
@@ -9,6 +8,7 @@ from PIL import Image, ImageChops
 
 from companion.apps import animate, movie
 from companion.apps.cli import main
+from companion.io import leftovers
 from companion.sim.scenario import load_scenario, run_scenario
 from companion.types import Circle
 
@@ -52,9 +52,9 @@ def test_the_other_outputs_are_unaffected_and_the_gif_is_an_output_of_the_run(an
     plain, anim = animated
     for name in ("log.csv", "metrics.json"):
         assert (plain / name).read_bytes() == (anim / name).read_bytes(), name
-    assert json.loads((anim / ".run.outputs").read_text()) == ["log.csv", "metrics.json",
-                                                               "run.gif"]
-    assert not list(anim.glob(".*.tmp")) and not list(anim.glob(".staging-*"))
+    assert sorted(p.name for p in (anim / ".run@current").iterdir()) == [
+        "log.csv", "metrics.json", "run.gif"]
+    assert leftovers(anim) == []
 
 
 def test_an_animation_outside_the_output_folder_is_written_there(tmp_path, capsys):
@@ -64,7 +64,7 @@ def test_an_animation_outside_the_output_folder_is_written_there(tmp_path, capsy
     assert Image.open(target).n_frames == 20
     assert str(target) in capsys.readouterr().out
     assert [p.name for p in target.parent.iterdir()] == ["fig4.gif"]
-    assert "fig4.gif" not in (tmp_path / "o" / ".run.outputs").read_text()
+    assert not (tmp_path / "o" / ".run@current" / "fig4.gif").exists()
 
 
 @pytest.mark.parametrize("name, message", [

@@ -260,6 +260,24 @@ def test_bench_bad_usage(argv, message, capsys):
     assert code == 2 and message in err and err.count("\n") == 1
 
 
+def test_bench_out_that_is_a_folder_is_refused_before_the_run(tmp_path, capsys):
+    """The JSON file's name is checked first (an IsADirectoryError after the whole run
+    before)."""
+    folder = tmp_path / "bench.json"
+    folder.mkdir()
+    code, out, err = run(["bench", "--out", str(folder)], capsys)
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert f"--out {folder}: is a folder, expected a file name" in err
+
+
+def test_person_csv_of_samples_nanoseconds_apart_is_one_line(tmp_path, capsys):
+    path = tmp_path / "ns.csv"
+    path.write_text("t,x,y\n" + "".join(f"{k * 1e-9:.10f},{0.01 * k},0\n" for k in range(50)))
+    code, _, err = run(["run", "line", "--person-csv", str(path), "--out", str(tmp_path / "o")],
+                       capsys)
+    assert code == 2 and err.count("\n") == 1 and f"{path}: the samples span" in err
+
+
 def test_a_reader_that_goes_away_ends_the_command_quietly_with_every_file_written(tmp_path):
     """``companion run ... | true``: no BrokenPipeError traceback, exit 0, outputs complete."""
     import subprocess

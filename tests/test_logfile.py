@@ -15,6 +15,7 @@ import pytest
 from companion import metrics
 from companion.apps import logfile, plots
 from companion.apps.cli import main
+from companion.io import leftovers
 from companion.params import REALISTIC
 from companion.sim import recorded
 from companion.sim.episode import BLOCK_ROWS
@@ -59,7 +60,7 @@ def test_run_streams_the_log_equal_to_the_log_in_memory(tmp_path, capsys, blocks
             assert got[key] == pytest.approx(value, rel=1e-12), key
         elif not isinstance(value, dict):
             assert got[key] == value, key
-    assert not list(tmp_path.glob(".*.tmp")) and not list(tmp_path.glob(".staging-*"))
+    assert leftovers(tmp_path) == []
 
 
 def test_soak_streams_its_log(tmp_path, capsys, blocks_written):

@@ -1,12 +1,13 @@
 """Files in and out: input cells parsed with one-line errors, outputs written whole or not at
-all (to a temporary file, then renamed), and a command's outputs replaced together
-(:class:`Outputs`)."""
+all (to a temporary file, then renamed), and a command's outputs switched together in one
+rename (:class:`Outputs`)."""
 
 from __future__ import annotations
 
 import csv
 import json
 import os
+import re
 import shutil
 import tempfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -120,24 +121,28 @@ def save_figure(fig: Any, path: str | Path, dpi: int = 120) -> Path:
     return atomic_write(path, lambda p: fig.savefig(p, dpi=dpi, format="png"))
 
 
-STAGING = ".staging-"
-
-
 class Outputs:
-    """The outputs of one run of ``command`` in ``folder``, all or nothing.
+    """The outputs of one run of ``command`` in ``folder``, all or nothing, switched in one step.
 
-    ``with Outputs(folder, "run") as stage:`` gives a hidden staging folder inside ``folder``
-    to write into. When the block ends normally the staged files replace every file the
-    previous run of ``command`` wrote there (a manifest, ``.<command>.outputs``, lists
-    them), so the folder never mixes two runs; when it ends with an exception (an error,
-    Ctrl-C, SIGTERM) the staging folder is removed and ``folder`` is left as it was.
-    Staging folders of processes that no longer exist (killed) are removed on entry.
+    ``with Outputs(folder, "run") as stage:`` gives a new hidden folder inside ``folder`` (a
+    generation, ``.run@<pid>-<n>``) to write into. When the block ends normally every output
+    name appears in ``folder`` as a symbolic link through ``.run@current`` (``log.csv ->
+    .run@current/log.csv``), and ``.run@current`` is re-pointed from the previous generation
+    to the new one by a single rename: a reader sees the previous run's set or the new one,
+    never a mix, whenever the process is killed. Names the previous run wrote and this one did
+    not are removed, and so is the previous generation. When the block ends with an exception
+    (an error, Ctrl-C, SIGTERM) the generation is removed and ``folder`` is left as it was.
+    What a killed process left behind (a generation that never became current, links to
+    names the current run lacks) is removed on the next entry.
     """
+
+    _count = 0
 
     def __init__(self, folder: str | Path, command: str):
         self.folder, self.command = Path(folder), command
-        self.stage = self.folder / f"{STAGING}{command}-{os.getpid()}"
         self._pid = os.getpid()
+        Outputs._count += 1
+        self.stage = self.folder / f".{command}{MARK}{self._pid}-{Outputs._count}"
 
     def __enter__(self) -> Path:
         self.folder.mkdir(parents=True, exist_ok=True)
@@ -152,26 +157,79 @@ class Outputs:
         if kind is not None:
             shutil.rmtree(self.stage, ignore_errors=True)
             return
-        manifest = self.folder / f".{self.command}.outputs"
-        try:
-            old = json.loads(manifest.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            old = []
-        new = sorted(p.name for p in self.stage.iterdir())
-        for name in old:
-            if name not in new and isinstance(name, str) and "/" not in name:
-                _remove(self.folder / name)
-        for name in new:
-            target = self.folder / name
-            if target.is_dir() and not target.is_symlink():   # a folder output (a bag)
-                old_dir = self.stage.with_name(f"{self.stage.name}-old")
-                os.replace(target, old_dir)
-                os.replace(self.stage / name, target)
-                shutil.rmtree(old_dir, ignore_errors=True)
-            else:
-                os.replace(self.stage / name, target)
-        write_text(manifest, json.dumps(new) + "\n")
-        shutil.rmtree(self.stage, ignore_errors=True)
+        switch(self.folder, self.command, self.stage)
+
+
+#: Separates a command's name from its generation in the hidden folders of :class:`Outputs`.
+MARK = "@"
+CURRENT = "current"
+_OUR_LINK = re.compile(rf"\.[^/]+{MARK}{CURRENT}/[^/]+")
+
+
+def current_link(folder: Path, command: str) -> Path:
+    """The link that names the current generation of ``command``'s outputs in ``folder``."""
+    return folder / f".{command}{MARK}{CURRENT}"
+
+
+def switch(folder: Path, command: str, generation: Path) -> None:
+    """Make ``generation`` (a folder inside ``folder``) the current outputs of ``command``: link
+    each of its names, re-point the current link by one rename, then remove what the previous
+    generation had alone (see :class:`Outputs`)."""
+    link = current_link(folder, command)
+    previous = _generation(link)
+    old = set() if previous is None else {p.name for p in previous.iterdir()}
+    old |= _legacy_names(folder, command)
+    new = sorted(p.name for p in generation.iterdir())
+    for name in new:
+        _place_link(folder / name, f"{link.name}/{name}", folder, command)
+    tmp = folder / f".{command}{MARK}{os.getpid()}.link.tmp"
+    tmp.unlink(missing_ok=True)
+    os.symlink(generation.name, tmp)
+    os.replace(tmp, link)                    # the one step from the old set to the new one
+    for name in sorted(old - set(new)):
+        if _links_into(folder / name, link.name) or name in _legacy_names(folder, command):
+            _remove(folder / name)
+    (folder / f".{command}.outputs").unlink(missing_ok=True)
+    if previous is not None and previous.resolve() != generation.resolve():
+        shutil.rmtree(previous, ignore_errors=True)
+
+
+def _generation(link: Path) -> Path | None:
+    """The generation folder ``link`` points to, or None."""
+    if not link.is_symlink():
+        return None
+    target = link.parent / os.readlink(link)
+    return target if target.is_dir() else None
+
+
+def _links_into(path: Path, link_name: str) -> bool:
+    return path.is_symlink() and os.readlink(path).startswith(f"{link_name}/")
+
+
+def _legacy_names(folder: Path, command: str) -> set[str]:
+    """Names listed by the manifest of earlier versions (``.<command>.outputs``), whose
+    outputs were plain files."""
+    try:
+        names = json.loads((folder / f".{command}.outputs").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return set()
+    return {n for n in names if isinstance(n, str) and "/" not in n and n not in ("", ".", "..")}
+
+
+def _place_link(path: Path, target: str, folder: Path, command: str) -> None:
+    """``path`` as a link to ``target`` (nothing to do if it is one already); a plain file or
+    folder in its place (an earlier version's output, or another command's) is replaced."""
+    if path.is_symlink() and os.readlink(path) == target:
+        return
+    if path.is_dir() and not path.is_symlink():
+        aside = folder / f".{command}{MARK}{os.getpid()}.old.tmp"
+        shutil.rmtree(aside, ignore_errors=True)
+        os.replace(path, aside)
+        shutil.rmtree(aside, ignore_errors=True)
+    tmp = folder / f".{path.name}.{os.getpid()}.link.tmp"
+    tmp.unlink(missing_ok=True)
+    os.symlink(target, tmp)
+    os.replace(tmp, path)
 
 
 def _remove(path: Path) -> None:
@@ -182,14 +240,32 @@ def _remove(path: Path) -> None:
 
 
 def remove_stale(folder: Path) -> None:
-    """Remove the staging folders and temporary files in ``folder`` that processes which no
-    longer exist left behind."""
-    for path in folder.glob(f"{STAGING}*"):
-        pid = path.name.rsplit("-", 1)[-1]
-        if not (pid.isdigit() and _alive(int(pid))):
-            shutil.rmtree(path, ignore_errors=True)
-    for path in folder.glob(".*.tmp"):
-        path.unlink(missing_ok=True)
+    """Remove what processes that no longer exist left in ``folder``: generations that never
+    became current, links to names their current generation lacks, temporary files, and the
+    staging folders of earlier versions."""
+    current = {p.resolve() for p in folder.glob(f".*{MARK}{CURRENT}") if p.is_symlink()}
+    for path in folder.glob(f".*{MARK}*"):
+        owner = path.name.rsplit(MARK, 1)[-1].split("-", 1)[0].split(".", 1)[0]
+        if path.name.endswith(f"{MARK}{CURRENT}") or not owner.isdigit():
+            continue
+        if not _alive(int(owner)) and path.resolve() not in current:
+            _remove(path)
+    for path in folder.iterdir():
+        if path.is_symlink() and not path.exists() and _OUR_LINK.fullmatch(os.readlink(path)):
+            path.unlink(missing_ok=True)      # into a current generation that lacks it
+    for path in [*folder.glob(".staging-*"), *folder.glob(".*.tmp")]:
+        _remove(path)
+
+
+def leftovers(folder: Path) -> list[str]:
+    """Hidden entries of ``folder`` other than the current links of :class:`Outputs` and their
+    generations (what an interrupted write leaves; none after a finished or failed one)."""
+    if not folder.is_dir():
+        return []
+    links = [p for p in folder.glob(f".*{MARK}{CURRENT}") if p.is_symlink()]
+    keep = {p.name for p in links} | {os.readlink(p) for p in links}
+    return sorted(p.name for p in folder.iterdir()
+                  if p.name.startswith(".") and p.name not in keep)
 
 
 def _alive(pid: int) -> bool:

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import Reader
 
+from companion.io import leftovers
 from companion.ros import convert
 from companion.ros.bag import BagWriter, RecordingTransport
 from companion.ros.record import RecordedNode, config_mapping, record_run, run_config
@@ -172,9 +173,9 @@ def test_sigterm_mid_run_leaves_no_bag(tmp_path):
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
         end = time.monotonic() + 120
-        while time.monotonic() < end and not list(tmp_path.glob(".staging-bag-*/bag/*.mcap")):
+        while time.monotonic() < end and not list(tmp_path.glob(".bag-bag@*/bag/*.mcap")):
             time.sleep(0.1)
-        assert list(tmp_path.glob(".staging-bag-*/bag/*.mcap")), "the run never started"
+        assert list(tmp_path.glob(".bag-bag@*/bag/*.mcap")), "the run never started"
         time.sleep(0.5)
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(60) == 143
@@ -182,7 +183,7 @@ def test_sigterm_mid_run_leaves_no_bag(tmp_path):
         proc.kill()
         proc.wait()
     assert not (tmp_path / "bag").exists()
-    assert not list(tmp_path.glob(".staging-*"))
+    assert leftovers(tmp_path) == []
     assert not (tmp_path / "o" / "log.csv").exists()
 
 
@@ -197,7 +198,8 @@ def test_a_second_recording_replaces_the_bag_whole(tmp_path, recorded):
             record_run(spec, run_config(spec, sc.controller), staged)
         with Reader(path) as r:
             assert r.topics["/odom"].msgcount == round(seconds / 0.05)
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".bag-bag.outputs", "bag"]
+    assert sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith(".")) == ["bag"]
+    assert leftovers(tmp_path) == []
 
 
 def test_config_mapping_round_trips(recorded):

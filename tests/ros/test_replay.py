@@ -13,6 +13,7 @@ import yaml
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
 from companion.apps.cli import main
+from companion.io import leftovers
 from companion.ros.bag import BagWriter
 from companion.ros.node import CompanionNode
 from companion.ros.record import (
@@ -107,7 +108,7 @@ def _bad(capsys, tmp_path, bag, *argv):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and str(bag) in err
     assert not (tmp_path / "bad" / "metrics.json").exists()
-    assert not list((tmp_path / "bad").glob(".staging-*"))
+    assert leftovers(tmp_path / "bad") == []
     return err
 
 

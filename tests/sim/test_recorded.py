@@ -231,3 +231,13 @@ def test_a_dense_recording_gives_the_same_person_as_a_sparser_one():
         a, b = dense.state(t), sparse.state(t)
         assert math.hypot(a.x - b.x, a.y - b.y) < 0.005
         assert abs(a.v - b.v) < 0.01 and abs(a.omega - b.omega) < 0.01
+
+
+def test_samples_too_close_together_are_one_line_naming_the_file(tmp_path):
+    """50 samples 1 ns apart: the smoothing averages them into one, which is not a walk; the
+    error names the file and the span (an IndexError traceback before)."""
+    t = np.arange(50) * 1e-9
+    path = write_csv(tmp_path / "ns.csv", t, 0.01 * np.arange(50), np.zeros(50))
+    with pytest.raises(DataError, match=r"ns\.csv: the samples span 4\.9e-08 s; expected at "
+                                        r"least 5 samples more than 0\.02 s apart"):
+        load_person_csv(path)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -178,6 +179,22 @@ def output_dir(path: Path) -> Path:
         raise UsageError(f"--out {path}: cannot write there ({exc.strerror})") from None
     if not os.access(path, os.W_OK | os.X_OK):
         raise UsageError(f"--out {path}: cannot write there (permission denied)")
+    return path
+
+
+def output_file(text: str, flag: str = "--out") -> Path:
+    """Check (before any work) that ``text`` can be written as a file: not a folder, in a
+    folder that exists (or can be made) and can be written (the file is written atomically
+    at the end)."""
+    path = Path(text)
+    if path.is_dir():
+        raise UsageError(f"{flag} {text}: is a folder, expected a file name")
+    try:                                        # made and tried now, not after the run
+        path.absolute().parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path.absolute().parent):
+            pass
+    except OSError as exc:
+        raise UsageError(f"{flag} {text}: cannot write there ({exc.strerror})") from None
     return path
 
 

@@ -30,6 +30,7 @@ from companion.apps.args import (
     int_arg,
     number_arg,
     output_dir,
+    output_file,
     params_arg,
     ranged,
     seed_arg,
@@ -353,13 +354,14 @@ def cmd_tune(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
+    out = output_file(args.out) if args.out else None
     episodes = int_arg(args.episodes, "--episodes")
     duration = duration_arg(args.duration, dt=Params().dt)
     workers = workers_arg(args)
     result = benchmark.run(episodes, duration, workers, not args.no_first_step,
                            progress=lambda msg: print(f"bench: {msg}", file=sys.stderr))
-    if args.out:
-        write_json(args.out, result)
+    if out is not None:
+        write_json(out, result)
     print(json.dumps(result, indent=2, allow_nan=False) if args.json else benchmark.text(result))
     return 0
 

@@ -5,7 +5,6 @@ MP4, both through :mod:`matplotlib.animation`'s writers)."""
 from __future__ import annotations
 
 import math
-import tempfile
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
@@ -13,7 +12,7 @@ from matplotlib import animation
 from matplotlib.figure import Figure
 from PIL import Image
 
-from companion.apps.args import UsageError
+from companion.apps.args import UsageError, output_file
 from companion.io import atomic_write
 
 EXTENSIONS = (".gif", ".mp4")
@@ -30,15 +29,7 @@ def target_arg(text: str, flag: str = "--animate") -> Path:
     if suffix == ".mp4" and not animation.FFMpegWriter.isAvailable():
         raise UsageError(f"{flag} {text}: .mp4 needs ffmpeg on PATH, which is not there; "
                          f"write a .gif instead")
-    if path.is_dir():
-        raise UsageError(f"{flag} {text}: is a folder, expected a file name")
-    try:                                        # made and tried now, not after the run
-        path.absolute().parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=path.absolute().parent):
-            pass
-    except OSError as exc:
-        raise UsageError(f"{flag} {text}: cannot write there ({exc.strerror})") from None
-    return path
+    return output_file(text, flag)
 
 
 def even_inches(width: float, dpi: float) -> float:

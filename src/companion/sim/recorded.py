@@ -229,7 +229,12 @@ def _tabulate(t: np.ndarray, x: np.ndarray, y: np.ndarray, smoothing: float,
     """Smoothed position, heading (unwrapped), speed and turn rate on a grid over [0, t[-1]]."""
     n = max(int(math.ceil(t[-1] / grid_step)), 1) + 1
     tg = np.linspace(0.0, t[-1], n)
-    t, x, y = binned(t, x, y, smoothing / BIN_FRACTION)
+    width, span = smoothing / BIN_FRACTION, t[-1] - t[0]
+    t, x, y = binned(t, x, y, width)
+    if len(t) < MIN_SAMPLES:
+        raise DataError(f"RecordedPerson: the samples span {span:.3g} s; expected at "
+                        f"least {MIN_SAMPLES} samples more than {width:g} s apart (the "
+                        f"smoothing of {smoothing:g} s averages closer ones)")
     sx, sy = smooth(t, x, smoothing), smooth(t, y, smoothing)
     dx, dy = sx.derivative(1)(tg), sy.derivative(1)(tg)
     ddx, ddy = sx.derivative(2)(tg), sy.derivative(2)(tg)
@@ -270,7 +275,10 @@ def load_person_csv(path: str | Path, smoothing: float = DEFAULT_SMOOTHING,
         it, or fewer than :data:`MIN_SAMPLES` samples.
     """
     t, x, y = read_person_csv(path)
-    return RecordedPerson(t, x, y, smoothing, standing_speed, grid_step)
+    try:
+        return RecordedPerson(t, x, y, smoothing, standing_speed, grid_step)
+    except DataError as exc:
+        raise DataError(f"{path}: {str(exc).removeprefix('RecordedPerson: ')}") from None
 
 
 def read_person_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
