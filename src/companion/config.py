@@ -283,14 +283,18 @@ def range_text(f: dataclasses.Field) -> str:
     return "a name" if f.type in (str, "str") else "[-1e6, 1e6]"
 
 
-def field_docs(cls: type, prefix: str = "") -> list[tuple[str, str, str, str, str]]:
+def field_docs(cls: type, prefix: str = "", instance: Any = None
+               ) -> list[tuple[str, str, str, str, str]]:
     """Rows ``(key, unit, default, meaning, range)`` for every field of ``cls``, nested tables
-    flattened."""
+    flattened; the defaults are ``instance``'s where given (a nested table's default)."""
     rows = []
     for f in dataclasses.fields(cls):
-        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+        if instance is not None:
+            default = getattr(instance, f.name)
+        else:
+            default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
         if dataclasses.is_dataclass(default):
-            rows.extend(field_docs(type(default), prefix=f"{prefix}{f.name}."))
+            rows.extend(field_docs(type(default), f"{prefix}{f.name}.", default))
             continue
         rows.append((f"{prefix}{f.name}", f.metadata.get("unit", ""), repr(default),
                      f.metadata.get("doc", ""), range_text(f)))

@@ -18,9 +18,10 @@ The plan (JSON): dt, steps, start [x, y, theta], velocity [v, omega], person [[x
 v, omega], ...] (one per step), cmd_vel_stamped, scan_every, scan_beams, range_min,
 range_max, command_timeout, decel [m/s^2, rad/s^2], wait (s for the node), step_wait (s),
 timeout (s, the whole run), inject {"k": [[topic, kind, value], ...]} (see ``malformed``),
-out (the log's file). The log: per step t, pose, applied velocity, whether a command came
-and its stamp (TwistStamped); the /companion/status messages heard (stamp, level, message);
-the phase the run ended in.
+set_at {"k": [[name, value], ...]} (parameters the robot sets on /companion before step k's
+clock, as ``ros2 param set`` would), out (the log's file). The log: per step t, pose, applied
+velocity, whether a command came and its stamp (TwistStamped); the parameters set (sets); the
+/companion/status messages heard (stamp, level, message); the phase the run ended in.
 """
 
 import json
@@ -33,6 +34,8 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import LaserScan
@@ -110,6 +113,7 @@ class Robot:
         node.create_subscription(kind, "/cmd_vel", self.on_cmd, RELIABLE)
         node.create_subscription(DiagnosticArray, "/companion/status", self.on_status, RELIABLE)
         self.commands, self.last, self.statuses = 0, None, []
+        self.params = None
 
     def on_cmd(self, msg):
         tw = getattr(msg, "twist", msg)
@@ -128,6 +132,19 @@ class Robot:
         while not done() and time.monotonic() < end:
             rclpy.spin_once(self.node, timeout_sec=0.01)
         return done()
+
+    def set_parameter(self, name, value):
+        """``ros2 param set /companion NAME VALUE`` from the robot: (successful, reason), or
+        None if no answer came in 5 s."""
+        if self.params is None:
+            self.params = AsyncParameterClient(self.node, "/companion")
+            self.params.wait_for_services(timeout_sec=5.0)
+        future = self.params.set_parameters([Parameter(name, value=value)])
+        self.spin_until(future.done, 5.0)
+        if not future.done():
+            return None
+        result = future.result().results[0]
+        return [result.successful, result.reason]
 
     def node_ready(self):
         """The node's endpoints are in our graph: it subscribes to what we publish and
@@ -167,6 +184,8 @@ class Robot:
                 pub = {"/odom": self.odom, "/person": self.person, "/scan": self.scan}[topic]
                 pub.publish(malformed(topic, kind, value, s, (x, y, theta), velocity, person,
                                       plan))
+            for name, value in plan.get("set_at", {}).get(str(k), []):
+                log.setdefault("sets", []).append([k, name, self.set_parameter(name, value)])
             before = self.commands
             self.clock.publish(Clock(clock=stamp(s)))
             came = self.spin_until(lambda n=before: self.commands > n, plan["step_wait"])

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from companion.ros.dds_base import LOOPBACK
 from companion.ros.messages import message
 
 PEER = Path(__file__).with_name("rclpy_peer.py")
@@ -29,30 +30,9 @@ needs_rclpy = pytest.mark.skipif(
     bool(MISSING), reason=f"ROS 2 Jazzy's Python packages are not installed (missing: "
     f"{', '.join(MISSING)}); pip install -e '.[test]' installs them")
 
-#: Fast DDS on the loopback interface only: one UDPv4 transport limited to 127.0.0.1, the
-#: built-in transports (UDP on every interface, shared memory) off, 127.0.0.1 as initial peer.
-FASTDDS_LOOPBACK = """<?xml version="1.0" encoding="UTF-8"?>
-<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
-  <transport_descriptors>
-    <transport_descriptor>
-      <transport_id>loopback</transport_id>
-      <type>UDPv4</type>
-      <interfaceWhiteList><address>127.0.0.1</address></interfaceWhiteList>
-    </transport_descriptor>
-  </transport_descriptors>
-  <participant profile_name="loopback" is_default_profile="true">
-    <rtps>
-      <userTransports><transport_id>loopback</transport_id></userTransports>
-      <useBuiltinTransports>false</useBuiltinTransports>
-      <builtin>
-        <initialPeersList>
-          <locator><udpv4><address>127.0.0.1</address></udpv4></locator>
-        </initialPeersList>
-      </builtin>
-    </rtps>
-  </participant>
-</profiles>
-"""
+#: Fast DDS on the loopback interface only, as companion ships it for users (one UDPv4 transport
+#: limited to 127.0.0.1, the built-in transports off, 127.0.0.1 as initial peer).
+FASTDDS_LOOPBACK = (LOOPBACK / "fastdds.xml").read_text()
 
 
 def stamp(store, sec=1_700_000_000, nanosec=123_456_789, frame="odom"):

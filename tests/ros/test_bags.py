@@ -21,11 +21,13 @@ from companion.ros.bag import BagWriter, RecordingTransport
 from companion.ros.record import RecordedNode, config_mapping, record_run, run_config
 from companion.ros.scene import DEFINITIONS, SCENE_TYPE, scene_types
 from companion.ros.settings import config_from_mapping
+from companion.ros.sim_robot import SIM_EPOCH_NS
 from companion.ros.transport import MemoryBus, MemoryTransport
 from companion.sim.scenario import load_scenario
 from companion.types import Pose
 
 DURATION = 4.0
+SIM = convert.TimeBase(SIM_EPOCH_NS)
 
 
 @pytest.fixture(scope="module")
@@ -51,14 +53,15 @@ def read(path):
 
 def test_the_bag_has_the_nodes_topics_types_and_metadata(recorded):
     path, log, _ = recorded
-    assert (path / "metadata.yaml").exists() and (path / f"{path.name}.mcap").exists()
+    assert (path / "metadata.yaml").exists() and (path / f"{path.name}_0.mcap").exists()
     types, msgs = read(path)
     assert types == {"/clock": "rosgraph_msgs/msg/Clock", "/odom": "nav_msgs/msg/Odometry",
                      "/tf": "tf2_msgs/msg/TFMessage", "/scan": "sensor_msgs/msg/LaserScan",
                      "/person": "nav_msgs/msg/Odometry", "/cmd_vel": "geometry_msgs/msg/Twist",
                      "/companion/status": "diagnostic_msgs/msg/DiagnosticArray",
                      "/companion/markers": "visualization_msgs/msg/MarkerArray",
-                     "/companion/scene": SCENE_TYPE}
+                     "/companion/scene": SCENE_TYPE, "/rosout": "rcl_interfaces/msg/Log",
+                     "/parameter_events": "rcl_interfaces/msg/ParameterEvent"}
     n = len(log)
     assert n == 80
     for topic in ("/odom", "/tf", "/cmd_vel", "/companion/status", "/clock"):
@@ -75,7 +78,7 @@ def test_the_bag_has_the_nodes_topics_types_and_metadata(recorded):
 def test_recorded_messages_equal_what_the_run_did(recorded):
     path, log, _ = recorded
     _, msgs = read(path)
-    t = np.array([tt for tt, _ in msgs["/odom"]]) * 1e-9
+    t = (np.array([tt for tt, _ in msgs["/odom"]]) - SIM_EPOCH_NS) * 1e-9
     np.testing.assert_allclose(t, log["t"], atol=1e-9)
     pose = np.array([[m.pose.pose.position.x, m.pose.pose.position.y,
                       convert.yaw(m.pose.pose.orientation)] for _, m in msgs["/odom"]])
@@ -84,7 +87,7 @@ def test_recorded_messages_equal_what_the_run_did(recorded):
     np.testing.assert_allclose(np.cos(pose[:, 2] - log["robot_theta"]), 1.0, atol=1e-12)
     cmd = np.array([convert.twist_velocity(m) for _, m in msgs["/cmd_vel"]])
     assert np.array_equal(cmd[:, 0], log["v"]) and np.array_equal(cmd[:, 1], log["omega"])
-    stamps = [convert.seconds(m.header.stamp) for _, m in msgs["/companion/status"]]
+    stamps = [SIM.seconds(m.header.stamp) for _, m in msgs["/companion/status"]]
     np.testing.assert_allclose(stamps, log["t"], atol=1e-9)
     # each sample's inputs are logged no later than the tick that used them
     assert all(ti <= tc for (ti, _), (tc, _) in zip(msgs["/odom"], msgs["/cmd_vel"]))
@@ -97,7 +100,7 @@ def test_the_scene_shows_robot_person_slot_obstacles_and_paths(recorded):
     entities = {e.id: e for e in last.entities}
     assert set(entities) == {"robot", "person", "person_estimate", "slot", "obstacles",
                              "paths"}
-    k = int(np.argmin(np.abs(log["t"] - last_t * 1e-9)))
+    k = int(np.argmin(np.abs(log["t"] - SIM.since(last_t))))
     body = entities["robot"].cylinders[0]
     assert (body.pose.position.x, body.pose.position.y) == (
         pytest.approx(log["robot_x"][k], abs=1e-9), pytest.approx(log["robot_y"][k], abs=1e-9))
@@ -129,7 +132,8 @@ def test_a_node_records_inputs_before_the_tick_that_used_them(tmp_path):
     cfg = config_from_mapping({"ros": {"topics": {"scan": ""}}})
     clock = [100.0]
     bag = BagWriter(tmp_path / "node", "jazzy")
-    node = RecordedNode(cfg, MemoryTransport(bus, ts), bag, clock=lambda: clock[0])
+    node = RecordedNode(cfg, MemoryTransport(bus, ts), bag, clock=lambda: clock[0],
+                        time_base=convert.ABSOLUTE)
     pub = MemoryTransport(bus, ts)
     odom = pub.publisher("/odom", "nav_msgs/msg/Odometry")
     person = pub.publisher("/person", "geometry_msgs/msg/PointStamped")
@@ -205,3 +209,52 @@ def test_a_second_recording_replaces_the_bag_whole(tmp_path, recorded):
 def test_config_mapping_round_trips(recorded):
     _, _, config = recorded
     assert config_from_mapping(config_mapping(config)) == config
+
+
+def test_the_bag_is_written_as_jazzys_rosbag2_writes_it(recorded):
+    """metadata.yaml version 9 with the offered QoS, type hash and counts of every topic, a
+    real ros_distro and a start on the documented simulated epoch (2000-01-01), never 0; the
+    MCAP file's ros2 profile, its channels' offered_qos_profiles and topic_type_hash, and its
+    own copy of the metadata (rosbag2_storage_mcap's layout)."""
+    import yaml
+    from mcap.reader import make_reader
+
+    path, log, _ = recorded
+    info = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    ts = scene_types("jazzy")
+    assert info["version"] == 9 and info["ros_distro"] == "jazzy"
+    assert info["storage_identifier"] == "mcap"
+    assert info["relative_file_paths"] == [f"{path.name}_0.mcap"]
+    start = info["starting_time"]["nanoseconds_since_epoch"]
+    assert start == SIM_EPOCH_NS and info["duration"]["nanoseconds"] >= round(
+        (len(log) - 1) * 0.05 * 1e9)
+    topics = {t["topic_metadata"]["name"]: t for t in info["topics_with_message_count"]}
+    odom = topics["/odom"]["topic_metadata"]
+    assert odom["type_description_hash"] == ts.hash_rihs01("nav_msgs/msg/Odometry")
+    (qos,) = odom["offered_qos_profiles"]
+    assert qos["reliability"] == "reliable" and qos["durability"] == "volatile"
+    assert qos["history"] == "keep_last" and qos["depth"] == 10
+    assert qos["deadline"] == {"sec": 9223372036, "nsec": 854775807}
+    assert topics["/scan"]["topic_metadata"]["offered_qos_profiles"][0]["reliability"] \
+        == "best_effort"
+    assert topics["/rosout"]["topic_metadata"]["offered_qos_profiles"][0]["durability"] \
+        == "transient_local"
+    assert sum(t["message_count"] for t in topics.values()) == info["message_count"]
+    with (path / f"{path.name}_0.mcap").open("rb") as fh:
+        reader = make_reader(fh)
+        summary = reader.get_summary()
+        assert reader.get_header().profile == "ros2"
+        for channel in summary.channels.values():
+            schema = summary.schemas[channel.schema_id]
+            assert schema.encoding == "ros2msg" and channel.message_encoding == "cdr"
+            assert channel.metadata["topic_type_hash"] == ts.hash_rihs01(schema.name)
+            assert yaml.safe_load(channel.metadata["offered_qos_profiles"])[0]["reliability"] \
+                in ("reliable", "best_effort")
+        (meta,) = [m for m in reader.iter_metadata() if m.name == "rosbag2"]
+        assert yaml.safe_load(meta.metadata["serialized_metadata"])["ros_distro"] == "jazzy"
+
+
+def test_the_metadata_has_no_yaml_anchors(recorded):
+    """Every value written out in full (a YAML reader without anchors reads it too)."""
+    text = (recorded[0] / "metadata.yaml").read_text()
+    assert "&id" not in text and "*id" not in text

@@ -13,9 +13,11 @@ import pytest
 from companion import metrics
 from companion.ros import convert
 from companion.ros.messages import typestore
-from companion.ros.node import CompanionNode, pose_at, spin
+from companion.ros.node import CompanionNode
+from companion.ros.placement import pose_at
 from companion.ros.settings import config_from_mapping
 from companion.ros.sim_robot import Pacer, run_sim_robot
+from companion.ros.spin import spin
 from companion.ros.transport import MemoryBus, MemoryTransport
 from companion.sim.runner import run_one
 from companion.sim.scenario import load_scenario
@@ -72,7 +74,7 @@ def person(t: float, x: float, y: float, frame: str = "odom"):
 def node_on_bus(**ros):
     bus, transport = graph()
     node = CompanionNode(config_from_mapping({"ros": {"topics": {"scan": ""}, **ros}}),
-                         transport())
+                         transport(), time_base=convert.ABSOLUTE)
     pub = transport()
     return bus, node, pub.publisher("/odom", "nav_msgs/msg/Odometry"), \
         pub.publisher("/person", "geometry_msgs/msg/PointStamped")
@@ -112,7 +114,8 @@ def test_stale_odometry_stops_the_robot_and_fresh_odometry_resumes():
 def scan_rig():
     """A node with a 0.3 s scan timeout, publishers of /odom, /scan and /person, the bus."""
     bus, transport = graph()
-    node = CompanionNode(config_from_mapping({"ros": {"scan_timeout_s": 0.3}}), transport())
+    node = CompanionNode(config_from_mapping({"ros": {"scan_timeout_s": 0.3}}), transport(),
+                         time_base=convert.ABSOLUTE)
     pub = transport()
     return (node, pub.publisher("/odom", "nav_msgs/msg/Odometry"),
             pub.publisher("/scan", "sensor_msgs/msg/LaserScan"),
@@ -143,10 +146,12 @@ def test_robot_frame_detections_are_placed_with_the_odometry_pose_at_their_stamp
     for k in range(11):
         t = 10.0 + 0.1 * k
         send_odom(odom(t, 0.0, 0.1 * k, math.pi / 2, 1.0))
-    d = node._detection(convert.Stamped(10.55, 1.0, 0.0, "base_link"), node._odom)
+    d = node.placer.detection(convert.Stamped(10.55, 1.0, 0.0, "base_link"), node._odom,
+                              "world")
     assert (d.x, d.y, d.frame) == (pytest.approx(0.0, abs=1e-9), pytest.approx(1.55),
                                    "world")
-    unknown = node._detection(convert.Stamped(10.55, 1.0, 0.0, "camera"), node._odom)
+    unknown = node.placer.detection(convert.Stamped(10.55, 1.0, 0.0, "camera"), node._odom,
+                                    "world")
     assert unknown.frame == "camera"          # the tracker rejects it (detection_frame)
 
 
@@ -183,7 +188,7 @@ def test_person_odometry_round_trip_keeps_what_was_measured():
         msg = convert.person_msg([p], "odometry", p.t, p.frame)
         back = convert.people_from(ts.deserialize_cdr(ts.serialize_cdr(
             msg, "nav_msgs/msg/Odometry"), "nav_msgs/msg/Odometry"), "odometry")[0]
-        for got, want in zip(dataclasses.astuple(back), dataclasses.astuple(p)):
+        for got, want in zip(back, p):
             assert got == pytest.approx(want) if want is not None else got is None
 
 

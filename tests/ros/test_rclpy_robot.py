@@ -67,17 +67,21 @@ def node_params(folder: Path, stamped: bool) -> Path:
     return path
 
 
-def run_loop(folder: Path, rclpy_env: dict, ros_domain: int, plan: dict, params: Path):
+def run_loop(folder: Path, rclpy_env: dict, ros_domain: int, plan: dict, params: Path,
+             transport: str = "dds"):
     """`companion node` and the rclpy robot as two bounded processes; the robot's log, and
-    whether the node was still running at the end, its exit code and output after SIGINT."""
+    whether the node was still running at the end, its exit code and output after SIGINT.
+    On ``transport`` rclpy the node is an rclpy node too (the robot's environment)."""
     plan_file = folder / "plan.json"
     plan_file.write_text(json.dumps(plan))
     env = {k: v for k, v in os.environ.items()
            if not k.startswith(("ROS_", "RMW_", "CYCLONEDDS_", "ZENOH_"))}
+    if transport == "rclpy":
+        env = dict(rclpy_env)
     env["HOME"] = str(folder)
     node = subprocess.Popen([*CLI, "node", "--params", str(params), "--domain-id",
-                             str(ros_domain)], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
+                             str(ros_domain), "--transport", transport], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         robot = subprocess.run([sys.executable, str(ROBOT), str(plan_file)], env=dict(
             rclpy_env, RMW_FASTRTPS_PUBLICATION_MODE="SYNCHRONOUS"),  # sent in publish order
@@ -177,3 +181,34 @@ def test_malformed_and_out_of_order_messages_get_a_named_reason(tmp_path, rclpy_
         assert before == (0, "ok"), (case, before)
     assert alive and code == 0, out
     assert "sent a zero velocity" in out
+
+
+def test_a_side_switch_set_by_the_robot_moves_it_to_the_other_side(tmp_path, rclpy_env,
+                                                                   ros_domain):
+    """The rclpy robot on the figure-8 in lock step with the node on --transport rclpy (so
+    that Fast DDS's parameter client gets its reply); at 10 s the robot sets
+    formation.bearing to left, as ``ros2 param set`` would: it is accepted, and the robot,
+    which started on the right, ends on the left, never nearer the person than the protective
+    distance, its velocities changing within the acceleration limits."""
+    _, spec, direct = figure8(30.0)
+    plan = robot_plan(spec, tmp_path / "robot.json")
+    plan["set_at"] = {"200": [["formation.bearing", "left"]]}
+    log, alive, code, out = run_loop(tmp_path, rclpy_env, ros_domain, plan,
+                                     node_params(tmp_path, False), transport="rclpy")
+    assert log["phase"] == "done", (log["phase"], out)
+    assert log["sets"] == [[200, "formation.bearing", [True, ""]]]
+    steps = np.array([row[:6] for row in log["steps"]], dtype=float)
+    t, x, y, th, v, w = steps.T
+    p = spec.params
+    person = np.array([plan["person"][k][:3] for k in range(len(t))])
+    rx, ry = x + p.robot.d * np.cos(th), y + p.robot.d * np.sin(th)
+    alpha = np.arctan2(np.sin(np.arctan2(ry - person[:, 1], rx - person[:, 0]) - person[:, 2]),
+                       np.cos(np.arctan2(ry - person[:, 1], rx - person[:, 0]) - person[:, 2]))
+    assert np.all(alpha[(t > 2.0) & (t < 10.0)] < 0.0)                 # right
+    assert np.all(np.abs(alpha[t > 25.0] - np.pi / 2) < 0.2)           # left
+    assert np.min(np.hypot(x - person[:, 0], y - person[:, 1])) > p.keepout.protective_distance
+    dv, dw = np.diff(v) / p.dt, np.diff(w) / p.dt
+    s = p.supervisor
+    assert np.all(dv <= s.accel_max + 1e-6) and np.all(dv >= -s.decel_max - 1e-6)
+    assert np.all(np.abs(dw) <= s.angular_accel_max + 1e-6)
+    assert alive and code == 0, out

@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import shutil
+from pathlib import Path
 
 import pytest
 import yaml
@@ -25,7 +26,7 @@ from companion.ros.record import (
 )
 from companion.ros.scene import scene_types
 from companion.ros.settings import config_from_mapping
-from companion.ros.sim_robot import Pacer
+from companion.ros.sim_robot import SIM_EPOCH_NS, Pacer
 from companion.ros.transport import MemoryBus, MemoryTransport
 from companion.sim.scenario import load_scenario
 
@@ -72,7 +73,7 @@ def test_a_sim_robot_bag_replays_exactly_with_the_nodes_parameters(tmp_path):
     bus = MemoryBus()
     ts = scene_types("jazzy")
     node = CompanionNode(cfg, MemoryTransport(bus, ts))
-    recording_sim_robot(spec, MemoryTransport(bus, ts), cfg.ros, Pacer(0.0), 0.0,
+    recording_sim_robot(spec, MemoryTransport(bus, ts), cfg.ros, Pacer(0.0), SIM_EPOCH_NS,
                         tmp_path / "sim", after=lambda t: node.tick(on_clock(t)))
     params = tmp_path / "node.yaml"
     params.write_text(yaml.safe_dump({"companion": {"ros__parameters": config_mapping(cfg)}}))
@@ -127,7 +128,7 @@ def test_wrong_message_type(tmp_path, run_bag, capsys):
 def test_truncated_or_corrupt_bag(tmp_path, run_bag, capsys, damage):
     bag = tmp_path / damage
     shutil.copytree(run_bag, bag)
-    data = bag / f"{run_bag.name}.mcap"
+    data = bag / f"{run_bag.name}_0.mcap"
     raw = bytearray(data.read_bytes())
     if damage == "truncated":
         raw = raw[: len(raw) // 2]
@@ -148,3 +149,42 @@ def test_empty_bag(tmp_path, capsys):
 
 def test_no_such_bag(tmp_path, capsys):
     assert "no such bag" in _bad(capsys, tmp_path, tmp_path / "nothing")
+
+
+def test_a_converted_bag_without_parameters_infers_the_side(tmp_path, capsys):
+    """rosbags-convert keeps the messages and drops custom_data: replay takes the person
+    topic's type from the topic and the side from the data (right, as recorded), and says
+    so; a bag whose person does not walk stops with one line naming the flag."""
+    import subprocess
+    import sys
+
+    sc = load_scenario("figure8", {"sensing": "realistic"})     # the right side
+    spec = dataclasses.replace(sc.episode(), duration=6.0)
+    record_run(spec, run_config(spec, sc.controller), tmp_path / "run")
+    conv = tmp_path / "converted"
+    done = subprocess.run([str(Path(sys.executable).parent / "rosbags-convert"), "--src",
+                           str(tmp_path / "run"), "--dst", str(conv)], capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "companion.parameters" not in (conv / "metadata.yaml").read_text()
+    m, _ = replay_metrics(tmp_path, conv)
+    out = capsys.readouterr().out
+    assert "side read from the data (right" in out
+    assert m["rmse_alpha_rad"] < 0.5 and m["ticks"] == 120
+    still = tmp_path / "still"
+    with Reader(tmp_path / "run") as r, Writer(still, version=9,
+                                                storage_plugin=StoragePlugin.MCAP) as w:
+        ts = scene_types("jazzy")
+        conns = {c.topic: w.add_connection(c.topic, c.msgtype, typestore=ts)
+                 for c in r.connections if c.topic in ("/odom", "/scan")}
+        person = w.add_connection("/person", "geometry_msgs/msg/PointStamped", typestore=ts)
+        for c, t, data in r.messages([c for c in r.connections if c.topic in conns]):
+            w.write(conns[c.topic], t, data)
+            if c.topic == "/odom":                 # a person standing still at (0, 1)
+                msg = ts.deserialize_cdr(data, c.msgtype)
+                p = ts.types["geometry_msgs/msg/PointStamped"](
+                    header=msg.header, point=ts.types["geometry_msgs/msg/Point"](
+                        x=0.0, y=1.0, z=0.0))
+                w.write(person, t, ts.serialize_cdr(p, "geometry_msgs/msg/PointStamped"))
+    err = _bad(capsys, tmp_path, still)
+    assert "the side cannot be told" in err and "--params FILE.yaml (formation.bearing)" in err

@@ -50,7 +50,7 @@ def test_the_wildcard_node_name_is_read(tmp_path):
     ("companion:\n  ros__parameters:\n    ros: {transprt: dds}\n",
      "ros.transprt: unknown key; did you mean 'transport'"),
     ("companion:\n  ros__parameters:\n    ros: {transport: ddss}\n",
-     "ros.transport: expected one of 'dds', 'zenoh', got 'ddss'"),
+     "ros.transport: expected one of 'dds', 'zenoh', 'rclpy', got 'ddss'"),
     ("companion:\n  ros__parameters:\n    ros: {domain_id: 500}\n",
      "ros.domain_id: expected an integer in [0, 232], got 500"),
     ("companion:\n  ros__parameters:\n    ros: {topics: {odom: odom}}\n",

@@ -25,7 +25,7 @@ import zenoh.ext
 
 from companion.errors import ConfigError
 from companion.ros import rmw_zenoh as wire
-from companion.ros.messages import typestore
+from companion.ros.messages import message, typestore
 from companion.ros.transport import DEFAULT, SENSOR_DATA, Qos
 from companion.ros.zenoh import ZenohTransport
 
@@ -397,3 +397,61 @@ def test_client_without_router_fails_in_bounded_time(monkeypatch, port):
     assert time.monotonic() - start < 3.0
     with pytest.raises(ConfigError, match="zenoh mode"):
         ZenohTransport(connect=[], mode="routr")
+
+
+# -- services and the graph ----------------------------------------------------------------------
+
+def test_a_service_answers_an_rmw_zenoh_query(port, listener):
+    """A queryable on the service's key expression (the service type and its hash, as
+    rmw_zenoh builds them) and an SS token; a plain Zenoh query carrying a request's CDR and a
+    client's attachment gets the response with the request's sequence number and the client's
+    GID back (src/detail/rmw_service_data.cpp); a query without an attachment is not answered."""
+    srv = "rcl_interfaces/srv/GetParameters"
+    asked = []
+
+    def handler(request):
+        asked.append(list(request.names))
+        return message(TS, f"{srv}_Response", values=[message(
+            TS, "rcl_interfaces/msg/ParameterValue", type=3, double_value=1.5)])
+
+    listener.serve("/companion/get_parameters", srv, handler)
+    h = wire.wire_service_hash(srv, "jazzy")
+    key = f"0/companion/get_parameters/rcl_interfaces::srv::dds_::GetParameters_/{h}"
+    request = bytes(TS.serialize_cdr(message(TS, f"{srv}_Request", names=["a", "bb"]),
+                                     f"{srv}_Request"))
+    gid = bytes(range(16))
+    raw = raw_session(port)
+    try:
+        def ask():
+            attachment = wire.attachment(7, time.time_ns(), gid)
+            return [r.ok for r in raw.get(key, payload=request, attachment=attachment,
+                                          timeout=2.0) if r.ok is not None]
+        replies = []
+        assert until(lambda: replies.append(ask()) or replies[-1], timeout=WAIT)
+        tokens = [str(r.ok.key_expr) for r in raw.liveliness().get(
+            f"@ros2_lv/0/{listener.zid}/**/SS/**", timeout=WAIT)]
+        unanswered = [r.ok for r in raw.get(key, payload=request, timeout=1.0)
+                      if r.ok is not None]
+    finally:
+        raw.close()
+    reply = replies[-1][0]
+    assert str(reply.key_expr) == key and asked[0] == ["a", "bb"]
+    response = TS.deserialize_cdr(reply.payload.to_bytes(), f"{srv}_Response")
+    assert response.values[0].double_value == 1.5
+    seq, _, back = wire.parse_attachment(reply.attachment.to_bytes())
+    assert (seq, back) == (7, gid)
+    assert len(tokens) == 1 and "/SS/%/%/listener/%companion%get_parameters/" in tokens[0]
+    assert h == "RIHS01_bf9803d5c74cf989a5de3e0c2e99444599a627c7ff75f97b8c05b01003675cbc"
+    assert unanswered == []
+
+
+def test_publishers_are_read_from_the_liveliness_tokens(listener, talker):
+    talker.publisher("/person", "geometry_msgs/msg/PoseArray", SENSOR_DATA)
+    talker.publisher("/odom", "nav_msgs/msg/Odometry")
+    listener.publisher("/person", "geometry_msgs/msg/PointStamped")      # its own: not listed
+    found = []
+    assert until(lambda: found.append(listener.publishers("/person")) or found[-1])
+    (pub,) = found[-1]
+    assert pub.msgtype == "geometry_msgs/msg/PoseArray" and not pub.qos.reliable
+    talker.close()
+    assert until(lambda: listener.publishers("/person") == [])

@@ -195,12 +195,15 @@ def parser() -> argparse.ArgumentParser:
 
 
 def _transport(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--transport", choices=("dds", "zenoh"),
-                   help="ROS 2 wire protocol (default: the parameters' ros.transport, dds)")
+    p.add_argument("--transport", choices=("dds", "zenoh", "rclpy"),
+                   help="ROS 2 wire protocol: dds or zenoh spoken by companion, or rclpy (the "
+                        "installed ROS 2; needed for ros2 param on a Fast DDS graph) "
+                        "(default: the parameters' ros.transport, dds)")
     p.add_argument("--zenoh-connect", metavar="ENDPOINT",
                    help="Zenoh router to connect to (default tcp/127.0.0.1:7447)")
     p.add_argument("--domain-id", type=int, metavar="N",
-                   help=f"ROS_DOMAIN_ID, {rng('--domain-id', 'N')} (default: the parameters', 0)")
+                   help=f"ROS domain, {rng('--domain-id', 'N')} (default: the parameters' "
+                        f"ros.domain_id, else $ROS_DOMAIN_ID, else 0)")
 
 
 def _ros_commands(sub) -> None:
@@ -230,7 +233,8 @@ def _ros_commands(sub) -> None:
     sr.add_argument("--ros-params", metavar="FILE", help="ROS 2 parameters YAML (its ros "
                     "section: topics, frames, transport)")
     sr.add_argument("--person-type", choices=("point", "pose", "pose_array", "odometry"),
-                    help="message type of the person detections (default: point)")
+                    help="message type of the person detections (default: the parameters' "
+                         "ros.person_type, point if auto)")
     sr.add_argument("--rate", metavar="X", help=f"real-time factor, {rng('--rate', 'X')}; "
                     "other than 1 publishes /clock (use_sim_time) (default 1)")
     sr.add_argument("--lockstep", action="store_true", help="lock step with the node: "
@@ -256,7 +260,8 @@ def _ros_commands(sub) -> None:
     rb.add_argument("--controller", choices=CONTROLLERS,
                     help="controller (default: the recording's, else lqr)")
     rb.add_argument("--params", metavar="FILE", help="ROS 2 parameters YAML (default: those a "
-                    "companion recording stored in the bag, else every default)")
+                    "companion recording stored in the bag, else the defaults with the side "
+                    "read from the bag)")
     rb.add_argument("--topics", nargs="+", metavar="KEY=NAME",
                     help="topic names, e.g. odom=/robot/odom person=/people scan= (none)")
     rb.add_argument("--out", metavar="DIR", help="output folder (default out/replay-BAG)")

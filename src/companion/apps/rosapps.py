@@ -82,44 +82,71 @@ def cmd_node(args: argparse.Namespace) -> int:
         config = dataclasses.replace(config, controller=args.controller)
     limit = duration_arg(args.duration) if args.duration else None
     bag = bag_arg(args.bag)
+    source = "--domain-id" if args.domain_id is not None else \
+        f"ros.domain_id in {args.params}" if config.ros.domain_id is not None else ""
     with bag_outputs(bag) as staged:
-        return _node(config, staged, limit)
+        return _node(config, staged, limit, source)
 
 
-def _node(config, staged: Path | None, limit: float | None) -> int:
-    from companion.ros.node import CompanionNode, spin
-    from companion.ros.record import RecordedNode, open_bag
-    from companion.ros.wire import open_transport
-    from companion.sim.runner import warm_up
+def _node(config, staged: Path | None, limit: float | None, domain_source: str) -> int:
+    from companion.ros.wire import domain_of, open_transport
 
-    warm_up()                      # compile or load the kernels before the first period
-    transport = open_transport(config.ros)
-    bag = open_bag(staged, config) if staged is not None else None
+    transport = open_transport(config.ros)   # first: discovery goes on while the node starts
+    bag = node = None
     try:
+        from companion.ros.node import CompanionNode
+        from companion.ros.record import RecordedNode, open_bag
+        from companion.ros.spin import spin
+        from companion.sim.runner import warm_up
+
+        warm_up()                  # compile or load the kernels before the first period
+        bag = open_bag(staged, config) if staged is not None else None
         node = CompanionNode(config, transport) if bag is None \
             else RecordedNode(config, transport, bag)
+        terminal = _terminal(node.log)
         r = config.ros
-        print(f"companion node: {config.controller} at {1 / config.params.dt:g} Hz over "
-              f"{r.transport} (domain {r.domain_id}); {r.topics.odom}, "
-              f"{r.topics.scan or 'no scan'}, {r.topics.person} in, {r.topics.cmd_vel} out",
-              flush=True)
+        domain, source = domain_of(r)
+        node.log.info(f"{config.controller} at {1 / config.params.dt:g} Hz over {r.transport} "
+                      f"(domain {domain} from {domain_source or source}); {r.topics.odom}, "
+                      f"{r.topics.scan or 'no scan'}, {r.topics.person} in, {r.topics.cmd_vel} "
+                      f"out; parameters at {node.name}/get_parameters ...")
         with stop_on_signals() as stop:
             ticks = spin(node, stop, limit)
-        print(f"companion node: stopped after {ticks} periods; sent a zero velocity",
-              flush=True)
+        node.log.info(f"stopped after {ticks} periods; sent a zero velocity")
+        node.log.removeHandler(terminal)
     finally:
+        if node is not None:
+            node.close()
         transport.close()
         if bag is not None:
             bag.close()
     return 0
 
 
+def _terminal(log):
+    """The node's log on the terminal: ``companion node: ...`` on stdout, warnings and worse
+    on stderr."""
+    import logging
+    import sys
+
+    class Split(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            warn = record.levelno >= logging.WARNING
+            print(f"companion node: {'warning: ' * warn}{record.getMessage()}",
+                  file=sys.stderr if warn else sys.stdout, flush=True)
+
+    handler = Split(logging.INFO)
+    log.addHandler(handler)
+    log.setLevel(logging.INFO)
+    return handler
+
+
 def cmd_sim_robot(args: argparse.Namespace) -> int:
     from companion.apps.commands import _write_run, summary_lines
     from companion.ros.record import recording_sim_robot
     from companion.ros.settings import load_node_config
-    from companion.ros.sim_robot import Interrupted, Pacer, run_sim_robot
-    from companion.ros.wire import open_transport
+    from companion.ros.sim_robot import SIM_EPOCH_NS, Interrupted, Pacer, run_sim_robot
+    from companion.ros.wire import domain_of, open_transport
     from companion.sim.runner import warm_up
 
     sc = build_scenario(args)
@@ -140,10 +167,13 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
     try:
         with stop_on_signals() as stop:
             pacer = Pacer(rate, stop)
-            epoch = sc.params.dt if ros.use_sim_time else None   # None: the clock at t = 0
+            # simulated time on the wire: the epoch one period before the first sample (so
+            # the node can tick on /clock while waiting); else the system clock at t = 0
+            epoch = SIM_EPOCH_NS + int(round(sc.params.dt * 1e9)) if ros.use_sim_time else None
+            domain, source = domain_of(ros)
             print(f"companion sim-robot: {sc.name}, {sc.duration:g} s at {rate:g}x real time "
-                  f"over {ros.transport} (domain {ros.domain_id}); waiting for a node on "
-                  f"{ros.topics.cmd_vel}", flush=True)
+                  f"over {ros.transport} (domain {domain} from {source}); waiting for a node "
+                  f"on {ros.topics.cmd_vel}", flush=True)
             try:
                 with bag_outputs(bag) as staged:
                     if staged is None:
@@ -169,7 +199,7 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
 
 def topics_arg(config, pairs: list[str] | None):
     """``config`` with the topics of ``--topics KEY=NAME ...`` (KEY a field of ros.topics)."""
-    from companion.ros.record import config_mapping
+    from companion.ros.parameters import config_mapping
     from companion.ros.settings import Topics, config_from_mapping
 
     if not pairs:
@@ -190,8 +220,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from companion.ros.settings import load_node_config
 
     bag = Path(args.bag)
-    config = bag_config(bag, load_node_config(args.params) if args.params else None,
-                        args.controller)
+    config, note = bag_config(bag, load_node_config(args.params) if args.params else None,
+                              args.controller)
+    if note:
+        print(f"replay: {note}", flush=True)
     config = topics_arg(config, args.topics)
     out = output_dir(Path(args.out or Path("out") / f"replay-{bag.name}"))
     with Outputs(out, "replay") as stage:

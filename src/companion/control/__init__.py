@@ -92,7 +92,16 @@ def make_controller(name: str, params: Params) -> SafetySupervisor:
     return SafetySupervisor(AvoidingController(entry.factory(params), params), params)
 
 
+def retune(stack: SafetySupervisor, name: str, params: Params) -> None:
+    """Give the running stack of controller ``name`` new parameters (docs/ros2.md, "Parameters
+    while running"): the controller and the avoidance layer are made anew with them, the
+    supervisor keeps its tracker and its last command (:meth:`SafetySupervisor.retune`)."""
+    entry = lookup(name)
+    params = entry.adjust(params)
+    stack.retune(AvoidingController(entry.factory(params), params), params)
+
+
 __all__ = ["AvoidingController", "CONTROLLERS", "Controller", "ImpedanceController",
            "LqrController", "PidController", "SafetySupervisor", "VsmController",
-           "lookup", "make_bare", "make_controller", "paper_lqr", "paper_params", "saturate",
-           "tuned_lqr_params"]
+           "lookup", "make_bare", "make_controller", "paper_lqr", "paper_params", "retune",
+           "saturate", "tuned_lqr_params"]

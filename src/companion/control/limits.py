@@ -22,9 +22,11 @@ def limit_rate(target: float, prev: float, grow: float, shrink: float, dt: float
 @jitable
 def reachable(target: float, prev: float, grow: float, shrink: float, bound: float,
               dt: float) -> float:
-    """``target`` after one period's rate limit from ``prev`` (:func:`limit_rate`) and the
-    bound ``|x| <= bound``: one axis of :func:`limit`."""
-    return min(max(limit_rate(target, prev, grow, shrink, dt), -bound), bound)
+    """``target`` held to the bound ``|x| <= bound``, then reached from ``prev`` under one
+    period's rate limit (:func:`limit_rate`): one axis of :func:`limit`. With ``|prev| <=
+    bound`` the result is within the bound; a ``prev`` beyond it (the bound was lowered while
+    running) comes down at the rate limit instead of jumping."""
+    return limit_rate(min(max(target, -bound), bound), prev, grow, shrink, dt)
 
 
 def limit(target: tuple[float, float], prev: tuple[float, float], params: Params

@@ -140,6 +140,16 @@ class SafetySupervisor:
             self._prev, self._started = saturate(cmd.v, cmd.omega, self.params.robot), True
             self.inner.applied(cmd)
 
+    def retune(self, inner: Controller, params: Params) -> None:
+        """Run on with new parameters (a formation, limits or gains changed while running) and
+        ``inner`` made with them: the tracker, the clock and the last command stay, so the rate
+        limits carry the robot from its last command towards the new slot; ``inner`` starts
+        fresh at the next step. Parameters of the clock and tracker must not change."""
+        self.inner, self.params = inner, params
+        self._odometry.robot = params.robot
+        self._inner_fresh = True
+        self._far_since = None
+
     # -- the pieces -----------------------------------------------------------------------
 
     def _detections(self, obs: Observation) -> tuple[PersonDetection, ...]:

@@ -16,9 +16,68 @@ from companion.geometry import wrap_pi
 from companion.ros.messages import make
 from companion.types import Circle, Command, PersonDetection, PersonEstimate, Pose, Scan
 
-#: A person as the wire carries it: a :class:`PersonDetection` whose ``frame`` is the ROS
-#: frame name of its header (the node maps it to the tracker's frames).
-Stamped = PersonDetection
+
+class Stamped(NamedTuple):
+    """A person as the wire carries it: the fields of :class:`PersonDetection` (``frame`` is
+    the ROS frame of the header, which the node maps to the tracker's frames) and the height
+    ``z`` (m; a camera's optical frame measures depth along z)."""
+
+    t: float
+    x: float
+    y: float
+    frame: str = "world"
+    covariance: tuple[float, float, float, float] | None = None
+    heading: float | None = None
+    heading_std: float | None = None
+    speed: float | None = None
+    turn_rate: float | None = None
+    velocity_std: tuple[float, float] | None = None
+    track_id: int | None = None
+    z: float = 0.0
+
+    @classmethod
+    def of(cls, d: PersonDetection, t: float, frame: str) -> Stamped:
+        """A detection of the simulator as the wire carries it, at ``t`` in ``frame``."""
+        return cls(t, d.x, d.y, frame, d.covariance, d.heading, d.heading_std, d.speed,
+                   d.turn_rate, d.velocity_std, d.track_id)
+
+
+class TimeBase(NamedTuple):
+    """Stamps on the wire (``builtin_interfaces/Time``, whole nanoseconds) and companion's
+    seconds since ``origin_ns``. Seconds near zero keep nanosecond precision, where a float
+    of 1.8e9 s (the system clock) or of the simulated epoch resolves only a few 1e-7 s; the
+    node and the simulated robot each count from their own origin, in whole seconds."""
+
+    origin_ns: int = 0
+
+    def seconds(self, stamp: Any) -> float:
+        """A ``builtin_interfaces/Time`` in seconds since the origin."""
+        return self.since(stamp.sec * 1_000_000_000 + stamp.nanosec)
+
+    def since(self, ns: int) -> float:
+        """A stamp in nanoseconds as seconds since the origin (whole seconds and the
+        fraction apart, so that a large count keeps its nanoseconds as far as a float can)."""
+        sec, nsec = divmod(ns - self.origin_ns, 1_000_000_000)
+        return sec + nsec * 1e-9
+
+    def ns(self, t: float) -> int:
+        """Seconds since the origin as a stamp in nanoseconds (rounded)."""
+        return int(self.origin_ns) + int(round(t * 1e9))
+
+    def stamp(self, t: float) -> Any:
+        """``builtin_interfaces/Time`` of ``t`` seconds since the origin (never 1e9 ns)."""
+        ns = self.ns(t)
+        return make("builtin_interfaces/msg/Time", sec=ns // 1_000_000_000,
+                    nanosec=ns % 1_000_000_000)
+
+    @classmethod
+    def at(cls, ns: int) -> TimeBase:
+        """The origin of a clock that reads ``ns``: its whole second."""
+        return cls(ns - ns % 1_000_000_000)
+
+
+#: Stamps as they are: seconds since 1970 (the recorder's log times, companion run's bags).
+ABSOLUTE = TimeBase(0)
 
 
 class OdometrySample(NamedTuple):
@@ -30,20 +89,23 @@ class OdometrySample(NamedTuple):
     velocity: tuple[float, float]
 
 
-def time_msg(t: float) -> Any:
-    """``builtin_interfaces/Time`` of ``t`` seconds (nanoseconds rounded, never 1e9)."""
-    ns = int(round(t * 1e9))
-    return make("builtin_interfaces/msg/Time", sec=ns // 1_000_000_000,
-                nanosec=ns % 1_000_000_000)
+def time_msg(t: float, tb: TimeBase = ABSOLUTE) -> Any:
+    """``builtin_interfaces/Time`` of ``t`` seconds since ``tb``'s origin."""
+    return tb.stamp(t)
 
 
-def seconds(stamp: Any) -> float:
-    """A ``builtin_interfaces/Time`` in seconds."""
-    return stamp.sec + stamp.nanosec * 1e-9
+def seconds(stamp: Any, tb: TimeBase = ABSOLUTE) -> float:
+    """A ``builtin_interfaces/Time`` in seconds since ``tb``'s origin."""
+    return tb.seconds(stamp)
 
 
-def header(t: float, frame: str) -> Any:
-    return make("std_msgs/msg/Header", stamp=time_msg(t), frame_id=frame)
+def stamp_ns(stamp: Any) -> int:
+    """A ``builtin_interfaces/Time`` in nanoseconds since 1970."""
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def header(t: float, frame: str, tb: TimeBase = ABSOLUTE) -> Any:
+    return make("std_msgs/msg/Header", stamp=tb.stamp(t), frame_id=frame)
 
 
 def yaw(q: Any) -> float:
@@ -66,10 +128,10 @@ def pose_msg(x: float, y: float, theta: float, z: float = 0.0) -> Any:
 
 # -- inputs ------------------------------------------------------------------------------
 
-def odometry_sample(msg: Any) -> OdometrySample:
+def odometry_sample(msg: Any, tb: TimeBase = ABSOLUTE) -> OdometrySample:
     """The pose (odometry frame) and body velocity of a nav_msgs/Odometry."""
     p, tw = msg.pose.pose, msg.twist.twist
-    return OdometrySample(seconds(msg.header.stamp),
+    return OdometrySample(tb.seconds(msg.header.stamp),
                           Pose(p.position.x, p.position.y, yaw(p.orientation)),
                           (tw.linear.x, tw.angular.z))
 
@@ -93,14 +155,24 @@ def _std(variance: float) -> float:
     return math.sqrt(variance) if variance > 0.0 else 0.0
 
 
-def people_from(msg: Any, kind: str) -> list[Stamped]:
+def person_types(kind: str) -> tuple[str, ...]:
+    """The message types the person topic takes with ``ros.person_type`` ``kind``."""
+    return tuple(PERSON_TYPES.values()) if kind == "auto" else (PERSON_TYPES[kind],)
+
+
+def person_kind(msgtype: str) -> str:
+    """The :data:`PERSON_TYPES` key of a person message type."""
+    return next(kind for kind, name in PERSON_TYPES.items() if name == msgtype)
+
+
+def people_from(msg: Any, kind: str, tb: TimeBase = ABSOLUTE) -> list[Stamped]:
     """Every person in a PointStamped, PoseStamped, PoseArray or Odometry (``kind`` as in
     :data:`PERSON_TYPES`), with the message's stamp and frame. An Odometry (an upstream
     tracker, a tag with an IMU) also gives the covariance, heading, speed and turn rate
     (diagonal variances; 0 means exact; as in sensor_msgs/Imu, a first variance of -1 means
     "not measured": c[0] for the position, c[35] for the heading, the twist's c[0] for speed
     and turn rate)."""
-    t, frame = seconds(msg.header.stamp), msg.header.frame_id
+    t, frame = tb.seconds(msg.header.stamp), msg.header.frame_id
     if kind == "odometry":
         p, c = msg.pose.pose, msg.pose.covariance
         tw, tc = msg.twist.twist, msg.twist.covariance
@@ -108,12 +180,14 @@ def people_from(msg: Any, kind: str) -> list[Stamped]:
         moving = (tw.linear.x, tw.angular.z, (_std(tc[0]), _std(tc[35]))) if tc[0] >= 0.0 \
             else (None, None, None)
         cov = (float(c[0]), float(c[1]), float(c[6]), float(c[7])) if c[0] >= 0.0 else None
-        return [Stamped(t, p.position.x, p.position.y, frame, cov, *heading, *moving)]
+        return [Stamped(t, p.position.x, p.position.y, frame, cov, *heading, *moving,
+                        z=p.position.z)]
     if kind == "point":
-        return [Stamped(t, msg.point.x, msg.point.y, frame)]
+        return [Stamped(t, msg.point.x, msg.point.y, frame, z=msg.point.z)]
     if kind == "pose":
-        return [Stamped(t, msg.pose.position.x, msg.pose.position.y, frame)]
-    return [Stamped(t, p.position.x, p.position.y, frame) for p in msg.poses]
+        p = msg.pose.position
+        return [Stamped(t, p.x, p.y, frame, z=p.z)]
+    return [Stamped(t, p.position.x, p.position.y, frame, z=p.position.z) for p in msg.poses]
 
 
 def twist_velocity(msg: Any) -> tuple[float, float]:
@@ -125,41 +199,41 @@ def twist_velocity(msg: Any) -> tuple[float, float]:
 # -- outputs -----------------------------------------------------------------------------
 
 def twist_msg(v: float, omega: float, stamped: bool = False, t: float = 0.0,
-              frame: str = "base_link") -> Any:
+              frame: str = "base_link", tb: TimeBase = ABSOLUTE) -> Any:
     """geometry_msgs/Twist, or TwistStamped with ``t`` and ``frame``."""
     tw = make("geometry_msgs/msg/Twist", linear=make("geometry_msgs/msg/Vector3", x=v),
               angular=make("geometry_msgs/msg/Vector3", z=omega))
-    return make("geometry_msgs/msg/TwistStamped", header=header(t, frame), twist=tw) \
+    return make("geometry_msgs/msg/TwistStamped", header=header(t, frame, tb), twist=tw) \
         if stamped else tw
 
 
 def odometry_msg(t: float, pose: Pose, velocity: tuple[float, float], frame: str,
-                 child: str) -> Any:
+                 child: str, tb: TimeBase = ABSOLUTE) -> Any:
     twist = make("geometry_msgs/msg/Twist",
                  linear=make("geometry_msgs/msg/Vector3", x=velocity[0]),
                  angular=make("geometry_msgs/msg/Vector3", z=velocity[1]))
-    return make("nav_msgs/msg/Odometry", header=header(t, frame), child_frame_id=child,
+    return make("nav_msgs/msg/Odometry", header=header(t, frame, tb), child_frame_id=child,
                 pose=make("geometry_msgs/msg/PoseWithCovariance",
                           pose=pose_msg(pose.x, pose.y, pose.theta)),
                 twist=make("geometry_msgs/msg/TwistWithCovariance", twist=twist))
 
 
-def tf_msg(t: float, pose: Pose, frame: str, child: str) -> Any:
+def tf_msg(t: float, pose: Pose, frame: str, child: str, tb: TimeBase = ABSOLUTE) -> Any:
     """tf2_msgs/TFMessage with one transform ``frame -> child`` at ``pose``."""
     transform = make("geometry_msgs/msg/Transform",
                      translation=make("geometry_msgs/msg/Vector3", x=pose.x, y=pose.y),
                      rotation=quaternion(pose.theta))
     return make("tf2_msgs/msg/TFMessage", transforms=[make(
-        "geometry_msgs/msg/TransformStamped", header=header(t, frame), child_frame_id=child,
+        "geometry_msgs/msg/TransformStamped", header=header(t, frame, tb), child_frame_id=child,
         transform=transform)])
 
 
-def scan_msg(t: float, scan: Scan, frame: str, period: float) -> Any:
+def scan_msg(t: float, scan: Scan, frame: str, period: float, tb: TimeBase = ABSOLUTE) -> Any:
     """sensor_msgs/LaserScan of a simulated :class:`Scan` (evenly spaced beams, in the
     sensor's own frame); ``inf`` stays "no return" and NaN an invalid beam."""
     angles = np.asarray(scan.angles, float)
     step = float(angles[1] - angles[0]) if angles.size > 1 else 0.0
-    return make("sensor_msgs/msg/LaserScan", header=header(t, frame),
+    return make("sensor_msgs/msg/LaserScan", header=header(t, frame, tb),
                 angle_min=float(angles[0]) if angles.size else 0.0,
                 angle_max=float(angles[-1]) if angles.size else 0.0, angle_increment=step,
                 scan_time=period, range_min=float(scan.range_min),
@@ -167,23 +241,24 @@ def scan_msg(t: float, scan: Scan, frame: str, period: float) -> Any:
                 ranges=np.asarray(scan.ranges, dtype=np.float32))
 
 
-def person_msg(people: Sequence[Stamped], kind: str, t: float, frame: str) -> Any:
+def person_msg(people: Sequence[Stamped], kind: str, t: float, frame: str,
+               tb: TimeBase = ABSOLUTE) -> Any:
     """The people as a PointStamped, PoseStamped or Odometry (the first) or a PoseArray
     (all)."""
     if kind == "odometry":
-        return _person_odometry(people[0])
+        return _person_odometry(people[0], tb)
     if kind == "pose_array":
-        return make("geometry_msgs/msg/PoseArray", header=header(t, frame),
-                    poses=[pose_msg(p.x, p.y, 0.0) for p in people])
+        return make("geometry_msgs/msg/PoseArray", header=header(t, frame, tb),
+                    poses=[pose_msg(p.x, p.y, 0.0, getattr(p, "z", 0.0)) for p in people])
     p = people[0]
     if kind == "point":
-        return make("geometry_msgs/msg/PointStamped", header=header(p.t, p.frame),
-                    point=point(p.x, p.y))
-    return make("geometry_msgs/msg/PoseStamped", header=header(p.t, p.frame),
-                pose=pose_msg(p.x, p.y, 0.0))
+        return make("geometry_msgs/msg/PointStamped", header=header(p.t, p.frame, tb),
+                    point=point(p.x, p.y, getattr(p, "z", 0.0)))
+    return make("geometry_msgs/msg/PoseStamped", header=header(p.t, p.frame, tb),
+                pose=pose_msg(p.x, p.y, 0.0, getattr(p, "z", 0.0)))
 
 
-def _person_odometry(p: Stamped) -> Any:
+def _person_odometry(p: Stamped, tb: TimeBase) -> Any:
     """nav_msgs/Odometry of one person; what was not measured has a first variance of -1
     (:func:`people_from`)."""
     pose = make("geometry_msgs/msg/PoseWithCovariance", pose=pose_msg(p.x, p.y, p.heading or 0.0))
@@ -194,21 +269,24 @@ def _person_odometry(p: Stamped) -> Any:
                                                                           p.turn_rate or 0.0))
     twist.covariance[[0, 35]] = (-1.0, -1.0) if p.speed is None or p.turn_rate is None \
         else np.square(p.velocity_std or (0.0, 0.0))
-    return make("nav_msgs/msg/Odometry", header=header(p.t, p.frame), pose=pose, twist=twist)
+    return make("nav_msgs/msg/Odometry", header=header(p.t, p.frame, tb), pose=pose,
+                twist=twist)
 
 
-def clock_msg(t: float) -> Any:
-    return make("rosgraph_msgs/msg/Clock", clock=time_msg(t))
+def clock_msg(t: float, tb: TimeBase = ABSOLUTE) -> Any:
+    return make("rosgraph_msgs/msg/Clock", clock=tb.stamp(t))
 
 
 LEVELS = {"ok": 0, "degraded": 1, "stopped": 2}   # DiagnosticStatus OK, WARN, ERROR
 
 
 def status_msg(t: float, cmd: Command, errors: tuple[float, float, float] | None,
-               name: str = "companion") -> Any:
+               name: str = "companion", tb: TimeBase = ABSOLUTE,
+               warnings: Sequence[str] = ()) -> Any:
     """diagnostic_msgs/DiagnosticArray: the supervisor's status (OK, WARN for degraded, ERROR
     for stopped) and reason, the command, the relative state ``(rho, alpha, beta)`` to the
-    person estimate and the estimate itself, as key-value pairs (SI units)."""
+    person estimate and the estimate itself, as key-value pairs (SI units); the node's active
+    ``warnings`` (a problem on its inputs) as ``warning`` and the message."""
     values = {"status": cmd.status, "reason": cmd.reason, "v": cmd.v, "omega": cmd.omega}
     if errors is not None:
         values.update(zip(("rho", "alpha", "beta"), errors))
@@ -217,11 +295,15 @@ def status_msg(t: float, cmd: Command, errors: tuple[float, float, float] | None
         values.update(person_x=e.state.x, person_y=e.state.y, person_theta=e.state.theta,
                       person_v=e.state.v, person_omega=e.state.omega,
                       person_std=e.position_std, person_track=e.status)
+    if warnings:
+        values["warning"] = " | ".join(warnings)
     pairs = [make("diagnostic_msgs/msg/KeyValue", key=k,
                   value=v if isinstance(v, str) else repr(float(v))) for k, v in values.items()]
+    message = " | ".join([cmd.reason or cmd.status, *warnings])
     status = make("diagnostic_msgs/msg/DiagnosticStatus", level=LEVELS[cmd.status], name=name,
-                  message=cmd.reason or cmd.status, values=pairs)
-    return make("diagnostic_msgs/msg/DiagnosticArray", header=header(t, ""), status=[status])
+                  message=message, values=pairs)
+    return make("diagnostic_msgs/msg/DiagnosticArray", header=header(t, "", tb),
+                status=[status])
 
 
 def status_of(msg: Any) -> tuple[str, str]:
@@ -242,9 +324,10 @@ _COLORS = {"person": (0.1, 0.4, 1.0, 0.9), "slot": (0.1, 0.8, 0.2, 0.8),
 
 
 def _marker(t: float, frame: str, ns: str, i: int, kind: int, x: float, y: float,
-            theta: float, scale: tuple[float, float, float], color: str) -> Any:
+            theta: float, scale: tuple[float, float, float], color: str,
+            tb: TimeBase = ABSOLUTE) -> Any:
     r, g, b, a = _COLORS[color]
-    return make("visualization_msgs/msg/Marker", header=header(t, frame), ns=ns, id=i,
+    return make("visualization_msgs/msg/Marker", header=header(t, frame, tb), ns=ns, id=i,
                 type=kind, action=0, pose=pose_msg(x, y, theta, 0.5 * scale[2]),
                 scale=make("geometry_msgs/msg/Vector3", x=scale[0], y=scale[1], z=scale[2]),
                 color=make("std_msgs/msg/ColorRGBA", r=r, g=g, b=b, a=a))
@@ -255,24 +338,25 @@ ARROW, CYLINDER, DELETEALL = 0, 3, 3   # Marker.type ARROW, CYLINDER; Marker.act
 
 def markers_msg(t: float, frame: str, estimate: PersonEstimate | None,
                 slot: tuple[float, float] | None,
-                obstacles: Sequence[tuple[Circle, float]]) -> Any:
+                obstacles: Sequence[tuple[Circle, float]], tb: TimeBase = ABSOLUTE) -> Any:
     """visualization_msgs/MarkerArray for RViz: the person estimate (an arrow along its
     heading), the desired slot and the known round obstacles with their influence range
     (pairs of circle and range, m, measured from the surface as the avoidance does); a
     DELETEALL first, so obstacles that went away disappear."""
-    clear = make("visualization_msgs/msg/Marker", header=header(t, frame), action=DELETEALL)
+    clear = make("visualization_msgs/msg/Marker", header=header(t, frame, tb), action=DELETEALL)
     out = [clear]
     if estimate is not None:
         s = estimate.walker
         out.append(_marker(t, frame, "person", 0, ARROW, s.x, s.y, s.theta, (0.6, 0.15, 0.15),
-                           "person"))
+                           "person", tb))
     if slot is not None:
-        out.append(_marker(t, frame, "slot", 0, CYLINDER, *slot, 0.0, (0.3, 0.3, 0.05), "slot"))
+        out.append(_marker(t, frame, "slot", 0, CYLINDER, *slot, 0.0, (0.3, 0.3, 0.05), "slot",
+                           tb))
     for i, (ob, reach) in enumerate(obstacles):
         out.append(_marker(t, frame, "obstacles", i, CYLINDER, ob.x, ob.y, 0.0,
-                           (2 * ob.radius, 2 * ob.radius, 0.5), "obstacle"))
+                           (2 * ob.radius, 2 * ob.radius, 0.5), "obstacle", tb))
         out.append(_marker(t, frame, "influence", i, CYLINDER, ob.x, ob.y, 0.0,
-                           (2 * (ob.radius + reach),) * 2 + (0.02,), "influence"))
+                           (2 * (ob.radius + reach),) * 2 + (0.02,), "influence", tb))
     return make("visualization_msgs/msg/MarkerArray", markers=out)
 
 

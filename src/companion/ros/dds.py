@@ -14,158 +14,47 @@ from __future__ import annotations
 
 import logging
 import os
-import re
 import threading
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 from cyclonedds._clayer import ddspy_take, ddspy_write
-from cyclonedds.core import (
-    DDSException,
-    InstanceState,
-    Listener,
-    Policy,
-    Qos,
-    SampleState,
-    ViewState,
-)
-from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
+from cyclonedds.core import DDSException, Listener, Policy, Qos
+from cyclonedds.domain import DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 
 from companion.errors import ConfigError
+from companion.ros.dds_base import (
+    ANY_STATE,
+    DISCOVERY_QOS,
+    DISCOVERY_TOPIC,
+    DISCOVERY_TYPE,
+    DOMAINS,
+    GID_TYPE,
+    NODE_NAME,
+    TOPIC_NAME,
+    dds_qos,
+    dds_topic_name,
+    gid,
+    loopback_config,
+    padded,
+    service_topics,
+    split_request,
+    with_header,
+)
 from companion.ros.idl import idl_type
-from companion.ros.messages import DEFAULT_DISTRO, message
+from companion.ros.messages import DEFAULT_DISTRO, message, ros_type_name
 from companion.ros.messages import typestore as distro_typestore
-from companion.ros.transport import DEFAULT
+from companion.ros.transport import DEFAULT, SERVICES, Endpoint, ros_domain_id
 from companion.ros.transport import Qos as RosQos
 
 log = logging.getLogger(__name__)
-
-#: The topic and type of rmw_dds_common's graph announcements.
-DISCOVERY_TOPIC = "ros_discovery_info"
-DISCOVERY_TYPE = "rmw_dds_common/msg/ParticipantEntitiesInfo"
-GID_TYPE = "rmw_dds_common/msg/Gid"
-#: rmw_dds_common's QoS for it: reliable, transient local, keep last 1 (a late joiner gets the
-#: current state).
-DISCOVERY_QOS = RosQos(reliable=True, transient_local=True, depth=1)
-#: Highest DDS domain id whose ports fit the RTPS port formula (ROS 2 documents 0..232).
-MAX_DOMAIN_ID = 232
-
-_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
-_TOPIC = re.compile(r"/?([A-Za-z_][A-Za-z0-9_]*)(/[A-Za-z_][A-Za-z0-9_]*)*")
-_ANY = SampleState.Any | ViewState.Any | InstanceState.Any
-
-
-def loopback_config() -> str:
-    """cyclonedds configuration for one machine: the ``lo`` interface only, multicast off,
-    participants found by unicast to 127.0.0.1 (ports of participant indices 0..9)."""
-    return ("<CycloneDDS><Domain Id=\"any\"><General><Interfaces>"
-            "<NetworkInterface name=\"lo\"/></Interfaces>"
-            "<AllowMulticast>false</AllowMulticast></General>"
-            "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
-            "<Peers><Peer address=\"127.0.0.1\"/></Peers></Discovery></Domain></CycloneDDS>")
-
-
-def ros_domain_id(value: int | str | None = None) -> int:
-    """The DDS domain: ``value``, else ``$ROS_DOMAIN_ID``, else 0; 0..232."""
-    source = "domain_id"
-    if value is None:
-        source, value = "ROS_DOMAIN_ID", os.environ.get("ROS_DOMAIN_ID", "0") or "0"
-    try:
-        domain = int(value)
-    except (TypeError, ValueError):
-        domain = -1
-    if not 0 <= domain <= MAX_DOMAIN_ID or isinstance(value, float):
-        raise ConfigError(f"{source}: {value!r} is not a ROS domain id; allowed: an integer "
-                          f"0..{MAX_DOMAIN_ID}")
-    return domain
-
-
-def dds_topic_name(topic: str, namespace: str = "/") -> str:
-    """``'/cmd_vel'`` -> ``'rt/cmd_vel'``; a relative name is taken in ``namespace``."""
-    if not _TOPIC.fullmatch(topic):
-        raise ConfigError(f"topic: {topic!r} is not a ROS topic name; allowed: names of letters, "
-                          "digits and underscores separated by '/', not starting with a digit")
-    absolute = topic if topic.startswith("/") else f"{namespace.rstrip('/')}/{topic}"
-    return "rt" + absolute
-
-
-def dds_qos(qos: RosQos, user_data: bytes) -> Qos:
-    """cyclonedds QoS of a ROS 2 profile as rmw_cyclonedds_cpp sets it: reliability, durability
-    (transient local keeps ``depth`` samples for late joiners), keep-last history, XCDR1, no
-    auto-dispose, and ``user_data``."""
-    policies = [
-        Policy.Reliability.Reliable(max_blocking_time=10**8) if qos.reliable
-        else Policy.Reliability.BestEffort,
-        Policy.History.KeepLast(qos.depth),
-        Policy.DataRepresentation(use_cdrv0_representation=True),
-        Policy.WriterDataLifecycle(autodispose=False),
-        Policy.Userdata(data=user_data),
-    ]
-    if qos.transient_local:
-        policies += [Policy.Durability.TransientLocal,
-                     Policy.DurabilityService(cleanup_delay=0, history=Policy.History.KeepLast(
-                         qos.depth), max_samples=-1, max_instances=-1,
-                         max_samples_per_instance=-1)]
-    else:
-        policies.append(Policy.Durability.Volatile)
-    return Qos(*policies)
-
-
-class _Domains:
-    """The process's cyclonedds domains with the configuration companion gave them: cyclonedds
-    has one configuration per domain id and process, so transports on the same id share it."""
-
-    def __init__(self) -> None:
-        self.lock = threading.Lock()
-        self.open: dict[int, tuple[Domain | None, str | None, int]] = {}
-
-    def acquire(self, domain_id: int, config: str | None) -> None:
-        with self.lock:
-            if domain_id in self.open:
-                domain, have, users = self.open[domain_id]
-                if have != config:
-                    raise ConfigError(f"dds_config: domain {domain_id} is already open in this "
-                                      "process with another configuration; allowed: the same one")
-                self.open[domain_id] = (domain, have, users + 1)
-                return
-            domain = None
-            if config is not None:
-                try:
-                    domain = Domain(domain_id, config)
-                except Exception as exc:   # cyclonedds raises its DDSException with the code
-                    raise ConfigError(f"dds_config: cyclonedds refused the configuration of "
-                                      f"domain {domain_id} ({exc})") from exc
-            self.open[domain_id] = (domain, config, 1)
-
-    def release(self, domain_id: int) -> None:
-        """One user fewer; the domain (its sockets and threads) goes with the last one, unless
-        participants made outside companion still use it (deleting it would delete them)."""
-        with self.lock:
-            domain, config, users = self.open[domain_id]
-            if users > 1 or (domain is not None and domain.get_participants()):
-                self.open[domain_id] = (domain, config, max(users - 1, 0))
-                return
-            del self.open[domain_id]
-            if domain is not None:
-                domain.__del__()
-
-
-_DOMAINS = _Domains()
-
-
-def padded(cdr: bytes) -> bytes:
-    """CDR bytes with zeros up to a multiple of 4, as rmw_cyclonedds_cpp sends them (cyclonedds
-    sends whole 4-byte words; unpadded, the last word's tail would be whatever memory held)."""
-    return bytes(cdr) + b"\0" * (-len(cdr) % 4)
-
-
-def gid(entity: Any) -> bytes:
-    """The 16 bytes of an entity's DDS GUID, which rmw uses as its GID."""
-    return entity.guid.bytes
+#: The vendor id that starts a Fast DDS (eProsima) GUID.
+FAST_DDS_VENDOR = b"\x01\x0f"
 
 
 class DdsTransport:
@@ -178,11 +67,11 @@ class DdsTransport:
     def __init__(self, node_name: str = "companion", namespace: str = "/",
                  domain_id: int | str | None = None, distro: str = DEFAULT_DISTRO,
                  typestore: Any = None, config: str | None = None):
-        if not _NAME.fullmatch(node_name):
+        if not NODE_NAME.fullmatch(node_name):
             raise ConfigError(f"node_name: {node_name!r} is not a ROS node name; allowed: "
                               "letters, digits and underscores, not starting with a digit")
         if namespace != "/" and not (namespace.startswith("/")
-                                     and _TOPIC.fullmatch(namespace.rstrip("/"))):
+                                     and TOPIC_NAME.fullmatch(namespace.rstrip("/"))):
             raise ConfigError(f"namespace: {namespace!r} is not a ROS namespace; allowed: '/' "
                               "or an absolute name such as '/robot1'")
         self.node_name, self.namespace = node_name, namespace.rstrip("/") or "/"
@@ -192,12 +81,16 @@ class DdsTransport:
         if config is None:
             source = "CYCLONEDDS_URI" if os.environ.get("CYCLONEDDS_URI") else "loopback"
             config = None if source == "CYCLONEDDS_URI" else loopback_config()
-        _DOMAINS.acquire(self.domain_id, config)
+        DOMAINS.acquire(self.domain_id, config)
         self._lock = threading.RLock()
-        self._topics: dict[str, tuple[str, Topic]] = {}
+        self._topics: dict[tuple[str, str], Topic] = {}
         self._readers: list[DataReader] = []
         self._writers: list[DataWriter] = []
         self._closed = False
+        self._services = 0
+        self._fast_dds_named = False
+        self._discovered: BuiltinDataReader | None = None
+        self._known: dict[Any, Any] = {}
         try:
             try:
                 self.participant = DomainParticipant(
@@ -213,7 +106,7 @@ class DdsTransport:
         except BaseException:
             if hasattr(self, "participant"):
                 self.participant.__del__()
-            _DOMAINS.release(self.domain_id)
+            DOMAINS.release(self.domain_id)
             raise
 
     def publisher(self, topic: str, msgtype: str, qos: RosQos = DEFAULT
@@ -235,7 +128,7 @@ class DdsTransport:
         deserialize = self.typestore.deserialize_cdr
 
         def on_data(reader: DataReader) -> None:
-            while samples := ddspy_take(reader._ref, _ANY, 64):
+            while samples := ddspy_take(reader._ref, ANY_STATE, 64):
                 if isinstance(samples, int):   # an error code: the reader is being deleted
                     return
                 for data, info in samples:
@@ -254,6 +147,84 @@ class DdsTransport:
 
         self._endpoint(DataReader, topic, msgtype, qos, Listener(on_data_available=on_data))
 
+    def serve(self, service: str, srvtype: str, handler: Callable[[Any], Any]) -> None:
+        """Answer ``service`` as rmw_cyclonedds_cpp does: requests on ``rq/<name>Request``,
+        each a 16-byte header (client id, sequence number) then the request; the reply on
+        ``rr/<name>Reply`` with the same header, so that the client takes it as its own. Both
+        endpoints carry ``serviceid=...;`` in their USER_DATA (a client waits for it before it
+        asks). The samples' DDS type carries the header (:func:`idl_type`'s
+        ``request_header``). A Fast DDS client (rmw_fastrtps_cpp) reads a reply only by a sample
+        identity that Cyclone DDS cannot send (ros2/rmw_cyclonedds#184): such a client is named
+        in one warning when it matches (its requests, without the header, are not answered). A
+        request that does not decode is logged and skipped."""
+        rq_topic, rq_type, rr_topic, rr_type = service_topics(service, srvtype)
+        with self._lock:
+            self._services += 1
+            sid = ".".join(f"{b:x}" for b in gid(self.participant)[:12]
+                           + self._services.to_bytes(4, "big"))
+        extra = f"serviceid={sid};".encode()
+        writer = self._endpoint(DataWriter, rr_topic, rr_type, SERVICES, raw=True,
+                                extra=extra)
+        ts = self.typestore
+
+        def on_match(reader: DataReader, status: Any) -> None:
+            """A client's request writer matched: name a Fast DDS one (once a transport)."""
+            if not self._fast_dds_named and self._from_fast_dds(
+                    reader, status.last_publication_handle):
+                self._fast_dds_named = True
+                log.warning("%s: a Fast DDS client (rmw_fastrtps_cpp) asked; it reads replies "
+                            "by a sample identity Cyclone DDS cannot send "
+                            "(ros2/rmw_cyclonedds#184), so it is not answered: run the node "
+                            "with --transport rclpy on such a graph", service)
+
+        def on_request(reader: DataReader) -> None:
+            while samples := ddspy_take(reader._ref, ANY_STATE, 16):
+                if isinstance(samples, int):
+                    return
+                for data, info in samples:
+                    if not info.valid_data or self._from_fast_dds(reader,
+                                                                  info.publication_handle):
+                        continue
+                    try:
+                        header, cdr = split_request(data)
+                        response = handler(ts.deserialize_cdr(cdr, rq_type))
+                        reply = with_header(header, ts.serialize_cdr(response, rr_type))
+                    except Exception as exc:  # a bad request must not stop it
+                        log.warning("%s: dropped a request (%s)", service, exc)
+                        continue
+                    ddspy_write(writer._ref, reply)
+
+        self._endpoint(DataReader, rq_topic, rq_type, SERVICES,
+                       Listener(on_data_available=on_request, on_subscription_matched=on_match),
+                       raw=True, extra=extra)
+
+    def publishers(self, topic: str) -> list[Endpoint]:
+        """Other participants' publishers on ``topic``, as DDS discovery reports them (the
+        DCPSPublication built-in topic: type name and offered reliability and durability)."""
+        name = dds_topic_name(topic, self.namespace)
+        with self._lock:
+            if self._closed:
+                return []
+            if self._discovered is None:
+                self._discovered = BuiltinDataReader(self.participant,
+                                                     BuiltinTopicDcpsPublication)
+            while found := self._discovered.take(N=256):
+                for s in found:
+                    alive = s.sample_info.valid_data and s.topic_name is not None
+                    if not alive:
+                        self._known.pop(s.key, None)
+                    elif s.participant_key != self.participant.guid:
+                        self._known[s.key] = s
+            mine = [s for s in self._known.values() if s.topic_name == name]
+        return [Endpoint(topic, ros_type_name(s.type_name), _offered(s.qos)) for s in mine]
+
+    def _from_fast_dds(self, reader: DataReader, handle: int) -> bool:
+        try:
+            writer = reader.get_matched_publication_data(handle)
+        except Exception:  # gone already: answer as usual
+            return False
+        return writer is not None and writer.participant_key.bytes[:2] == FAST_DDS_VENDOR
+
     def close(self) -> None:
         """Tell the graph the node is gone, then delete the participant (reliable writers linger
         up to 1 s for their last samples to be acknowledged, cyclonedds' default)."""
@@ -264,10 +235,11 @@ class DdsTransport:
             try:
                 self._announce(node=False)
             finally:
-                for entity in [*self._readers, *self._writers, self._discovery,
-                               *(topic for _, topic in self._topics.values()), self.participant]:
+                discovered = [self._discovered] if self._discovered is not None else []
+                for entity in [*self._readers, *self._writers, self._discovery, *discovered,
+                               *self._topics.values(), self.participant]:
                     entity.__del__()
-                _DOMAINS.release(self.domain_id)
+                DOMAINS.release(self.domain_id)
 
     def __enter__(self) -> DdsTransport:
         return self
@@ -276,28 +248,31 @@ class DdsTransport:
         self.close()
 
     def _endpoint(self, kind: type, topic: str, msgtype: str, qos: RosQos,
-                  listener: Listener | None = None) -> Any:
-        """A new DataWriter or DataReader of ``msgtype`` on ROS ``topic``, announced."""
+                  listener: Listener | None = None, raw: bool = False,
+                  extra: bytes = b"") -> Any:
+        """A new DataWriter or DataReader of ``msgtype`` on ROS ``topic`` (``raw``: ``topic``
+        is already a DDS topic name, of a service, whose samples carry rmw_cyclonedds_cpp's
+        request header), announced; ``extra`` goes before the type hash in the USER_DATA."""
         with self._lock:
-            endpoint = kind(self.participant, self._topic(dds_topic_name(topic, self.namespace),
-                            msgtype), qos=dds_qos(qos, self._user_data(msgtype)),
+            name = topic if raw else dds_topic_name(topic, self.namespace)
+            endpoint = kind(self.participant, self._topic(name, msgtype, raw),
+                            qos=dds_qos(qos, extra + self._user_data(msgtype)),
                             listener=listener)
             (self._writers if kind is DataWriter else self._readers).append(endpoint)
             self._announce()
         return endpoint
 
-    def _topic(self, name: str, msgtype: str) -> Topic:
-        """The participant's DDS topic ``name`` of ``msgtype``; one type per topic."""
-        if name in self._topics:
-            have, topic = self._topics[name]
-            if have != msgtype:
-                raise ConfigError(f"topic: {name[2:] if name.startswith('rt/') else name} is "
-                                  f"already {have} in this node; allowed: one type per topic")
-            return topic
+    def _topic(self, name: str, msgtype: str, request_header: bool = False) -> Topic:
+        """The participant's DDS topic ``name`` of ``msgtype`` (one topic may carry several
+        types, each its own DDS topic of the same name: a reader matches writers of its type
+        only)."""
+        key = (name, msgtype)
+        if key in self._topics:
+            return self._topics[key]
         if self._closed:
             raise RuntimeError("the DDS transport is closed")
-        topic = Topic(self.participant, name, idl_type(self.typestore, msgtype))
-        self._topics[name] = (msgtype, topic)
+        topic = Topic(self.participant, name, idl_type(self.typestore, msgtype, request_header))
+        self._topics[key] = topic
         return topic
 
     def _user_data(self, msgtype: str) -> bytes:
@@ -324,3 +299,12 @@ class DdsTransport:
                            padded(self.typestore.serialize_cdr(info, DISCOVERY_TYPE)))
         if code < 0:
             raise RuntimeError(f"DDS write on {DISCOVERY_TOPIC} failed (code {code})")
+
+
+def _offered(qos: Any) -> RosQos:
+    """The reliability and durability a discovered endpoint offers (depth: not announced)."""
+    policies = list(qos) if qos is not None else []
+    best_effort = any(p == Policy.Reliability.BestEffort for p in policies)
+    transient = any(p in (Policy.Durability.TransientLocal, Policy.Durability.Transient,
+                          Policy.Durability.Persistent) for p in policies)
+    return RosQos(reliable=not best_effort, transient_local=transient, depth=0)

@@ -30,14 +30,21 @@ PRIMITIVES: dict[str, Any] = {
 _TYPES: dict[tuple[int, str], tuple[Any, type[IdlStruct]]] = {}
 
 
-def idl_type(typestore: Any, msgtype: str) -> type[IdlStruct]:
+def idl_type(typestore: Any, msgtype: str, request_header: bool = False) -> type[IdlStruct]:
     """The cyclonedds struct of ``msgtype`` (``'geometry_msgs/msg/Twist'``), named as DDS names
     it (``geometry_msgs::msg::dds_::Twist_``), with nested messages, fixed arrays, bounded and
-    unbounded sequences and strings as the typestore defines them."""
-    key = (id(typestore), msgtype)
+    unbounded sequences and strings as the typestore defines them. ``request_header``: a
+    service's request or reply as rmw_cyclonedds_cpp sends it, after its 16-byte header (client
+    id, sequence number; :data:`companion.ros.dds_base.REQUEST_HEADER`), so that cyclonedds
+    checks the samples against their real layout."""
+    key = (id(typestore), msgtype, request_header)
     if key not in _TYPES:
-        fields = {name: _field(typestore, desc) for name, desc in typestore.fielddefs[msgtype][1]}
-        cls = make_idl_struct(msgtype.replace("/", "__"), dds_type_name(msgtype), fields)
+        fields = {"request_header_guid": idl.uint64,
+                  "request_header_seq": idl.int64} if request_header else {}
+        fields.update({name: _field(typestore, desc)
+                       for name, desc in typestore.fielddefs[msgtype][1]})
+        cls = make_idl_struct(msgtype.replace("/", "__") + "__with_header" * request_header,
+                              dds_type_name(msgtype), fields)
         _TYPES[key] = (typestore, cls)   # the typestore is kept so its id stays unique
     return _TYPES[key][1]
 

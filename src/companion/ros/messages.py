@@ -11,7 +11,7 @@ from functools import cache
 from typing import Any
 
 import numpy as np
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Nodetype
 
 from companion.errors import ConfigError
@@ -23,11 +23,75 @@ DEFAULT_DISTRO = "jazzy"
 
 @cache
 def typestore(distro: str = DEFAULT_DISTRO) -> Any:
-    """The typestore of ``distro`` (one of :data:`DISTROS`)."""
+    """The typestore of ``distro`` (one of :data:`DISTROS`), with the parameter services'
+    request, response and event types added (:data:`SERVICES`; rosbags has messages only)."""
     if distro not in DISTROS:
         raise ConfigError(f"distro: unknown ROS 2 distribution {distro!r}; "
                           f"allowed: {', '.join(DISTROS)}")
-    return get_typestore(DISTROS[distro])
+    store = get_typestore(DISTROS[distro])
+    store.register(service_types())
+    return store
+
+
+#: The services a ROS 2 node serves for its parameters (rcl_interfaces/srv, as in Jazzy's
+#: .srv files): name -> (request fields, response fields).
+SERVICES = {
+    "rcl_interfaces/srv/ListParameters": ("string[] prefixes\nuint64 depth",
+                                          "rcl_interfaces/ListParametersResult result"),
+    "rcl_interfaces/srv/GetParameters": ("string[] names",
+                                         "rcl_interfaces/ParameterValue[] values"),
+    "rcl_interfaces/srv/SetParameters": ("rcl_interfaces/Parameter[] parameters",
+                                         "rcl_interfaces/SetParametersResult[] results"),
+    "rcl_interfaces/srv/SetParametersAtomically": ("rcl_interfaces/Parameter[] parameters",
+                                                   "rcl_interfaces/SetParametersResult result"),
+    "rcl_interfaces/srv/DescribeParameters": ("string[] names",
+                                              "rcl_interfaces/ParameterDescriptor[] descriptors"),
+    "rcl_interfaces/srv/GetParameterTypes": ("string[] names", "uint8[] types"),
+}
+_EVENT_INFO = "service_msgs/msg/ServiceEventInfo"
+
+
+def service_types() -> dict[str, Any]:
+    """rosbags field definitions of every service of :data:`SERVICES`: ``<srv>_Request``,
+    ``<srv>_Response``, ``<srv>_Event`` and the service itself (its three messages), as rosidl
+    generates them."""
+    texts = {}
+    for srv, (request, response) in SERVICES.items():
+        texts.update({f"{srv}_Request": request, f"{srv}_Response": response,
+                      f"{srv}_Event": (f"service_msgs/ServiceEventInfo info\n"
+                                       f"{srv}_Request[<=1] request\n"
+                                       f"{srv}_Response[<=1] response"),
+                      srv: (f"{srv}_Request request_message\n{srv}_Response response_message\n"
+                            f"{srv}_Event event_message")})
+    types: dict[str, Any] = {}
+    for name, text in texts.items():
+        (parsed,) = get_types_from_msg(text, "companion/msg/Parsed").values()
+        types[name] = _srv_names(parsed)
+    return types
+
+
+@cache
+def service_type_hash(srv: str, distro: str = DEFAULT_DISTRO) -> str:
+    """The RIHS01 hash of a service of :data:`SERVICES` as rosidl computes it (rmw_zenoh puts it
+    in a service's key expression). rosidl reads ``char`` in a .msg as uint8 while rosbags
+    hashes it as a char, so the hash is taken in a private typestore whose
+    service_msgs/msg/ServiceEventInfo has its ``char[16] client_gid`` as ``uint8[16]``."""
+    store = get_typestore(DISTROS[distro])
+    consts, fields = store.fielddefs[_EVENT_INFO]
+    store.fielddefs[_EVENT_INFO] = (consts, [
+        (name, (Nodetype.ARRAY, ((Nodetype.BASE, ("uint8", 0)), desc[1][1]))) if name ==
+        "client_gid" else (name, desc) for name, desc in fields])
+    store.register(service_types())
+    return store.hash_rihs01(srv)
+
+
+def _srv_names(value: Any) -> Any:
+    """rosbags reads ``pkg/srv/Name`` in a .msg as ``pkg/srv/msg/Name``: put it back."""
+    if isinstance(value, str):
+        return value.replace("/srv/msg/", "/srv/")
+    if isinstance(value, (tuple, list)):
+        return type(value)(_srv_names(v) for v in value)
+    return value
 
 
 def dds_type_name(msgtype: str) -> str:
@@ -35,6 +99,15 @@ def dds_type_name(msgtype: str) -> str:
     rmw_zenoh wire name)."""
     package, kind, name = msgtype.split("/")
     return f"{package}::{kind}::dds_::{name}_"
+
+
+def ros_type_name(dds_type: str) -> str:
+    """``'geometry_msgs::msg::dds_::Twist_'`` -> ``'geometry_msgs/msg/Twist'``; a name of
+    another form (a plain DDS type) is returned as it is."""
+    parts = dds_type.split("::")
+    if len(parts) == 4 and parts[2] == "dds_" and parts[3].endswith("_"):
+        return f"{parts[0]}/{parts[1]}/{parts[3][:-1]}"
+    return dds_type
 
 
 def type_hash(msgtype: str, distro: str = DEFAULT_DISTRO) -> str:

@@ -4,15 +4,20 @@ ROS 2 node on any :class:`~companion.ros.transport.Transport`.
 Messages are stored as they arrive (any thread); :meth:`CompanionNode.tick`, called every
 period ``dt`` on the node's clock (the system clock, or /clock with ``use_sim_time``), turns
 what arrived into one :class:`~companion.types.Observation` and publishes the command, the
-status and the markers. Header stamps, not arrival times, place every input in time: a
-detection or scan is placed with the odometry pose at its stamp (interpolated), and odometry
-older than ``ros.odom_timeout_s`` or no scan for ``ros.scan_timeout_s`` stops the robot
-(reasons ``odometry_stale``, ``scan_stale``) until fresh data return. docs/ros2.md.
+status and the markers. Header stamps, not arrival times, place every input in time, and the
+transform tree places it in space (:mod:`companion.ros.placement`); odometry older than
+``ros.odom_timeout_s`` or no scan for ``ros.scan_timeout_s`` stops the robot (reasons
+``odometry_stale``, ``scan_stale``) until fresh data return. Like every ROS 2 node it serves
+its parameters (:mod:`companion.ros.parameters`), logs to /rosout, and names what it sees
+wrong on the graph: a publisher on an input of a type or QoS it cannot take
+(:mod:`companion.ros.graph`). Times inside the node are seconds since its
+:class:`~companion.ros.convert.TimeBase`'s origin. docs/ros2.md.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import threading
 import time
@@ -20,18 +25,20 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
-import numpy as np
-
-from companion.control import make_controller
+from companion.control import make_controller, retune
 from companion.control.avoidance import influence_range
 from companion.control.slot import slot_point
 from companion.geometry import unicycle_step, wrap_pi
 from companion.model import relative_state
 from companion.perception import extract_obstacles
-from companion.ros import convert
-from companion.ros.convert import OdometrySample, Stamped
+from companion.ros import convert, graph
+from companion.ros.convert import OdometrySample, Stamped, TimeBase, person_types
+from companion.ros.parameters import ParameterServer
+from companion.ros.placement import WAIT, Placer, flat
+from companion.ros.rosout import RosoutHandler, logger_name
 from companion.ros.settings import NodeConfig
-from companion.ros.transport import DEFAULT, SENSOR_DATA, Qos, Transport
+from companion.ros.tf import TransformBuffer, from_message
+from companion.ros.transport import DEFAULT, PARAMETER_EVENTS, ROSOUT, Qos, Transport
 from companion.types import (
     Circle,
     Command,
@@ -42,6 +49,10 @@ from companion.types import (
 )
 
 _NOWHERE = Pose(math.nan, math.nan, math.nan)
+#: How often (s of node time) the node looks at the publishers on its input topics.
+GRAPH_PERIOD_S = 1.0
+#: A change of status is logged at most this often (s); a stop is logged at once.
+STATUS_LOG_S = 1.0
 
 
 class View(NamedTuple):
@@ -62,70 +73,132 @@ def with_reasons(cmd: Command, reasons: list[str]) -> Command:
                                reason="+".join([cmd.reason] * bool(cmd.reason) + reasons))
 
 
-def pose_at(samples: deque[OdometrySample], t: float) -> Pose | None:
-    """The odometry pose at time ``t``: interpolated between the samples around it, or
-    moved on from the nearest end with its velocity (at most 0.5 s); None without samples."""
-    if not samples:
-        return None
-    if t <= samples[0].t or t >= samples[-1].t:
-        s = samples[0] if t <= samples[0].t else samples[-1]
-        x, y, th = unicycle_step(s.pose.x, s.pose.y, s.pose.theta, *s.velocity,
-                                 max(-0.5, min(t - s.t, 0.5)))
-        return Pose(x, y, wrap_pi(th))
-    lo, hi = 0, len(samples) - 1
-    while hi - lo > 1:              # the samples are in time order
-        mid = (lo + hi) // 2
-        lo, hi = (mid, hi) if samples[mid].t <= t else (lo, mid)
-    a, b = samples[lo], samples[hi]
-    w = (t - a.t) / (b.t - a.t) if b.t > a.t else 0.0
-    dth = wrap_pi(b.pose.theta - a.pose.theta)
-    return Pose(a.pose.x + w * (b.pose.x - a.pose.x), a.pose.y + w * (b.pose.y - a.pose.y),
-                wrap_pi(a.pose.theta + w * dth))
-
-
 class CompanionNode:
-    """The node's state and its one step; see the module docstring."""
+    """The node's state and its one step; see the module docstring. ``clock()`` is the
+    system clock (s since 1970); ``time_base`` the origin of the node's seconds (default: the
+    clock's whole second at start, or with ``use_sim_time`` the first stamp received)."""
 
     def __init__(self, config: NodeConfig, transport: Transport,
-                 clock: Callable[[], float] = time.time):
+                 clock: Callable[[], float] = time.time, time_base: TimeBase | None = None):
         self.config, self.transport = config, transport
-        p, r = config.params, config.ros
-        self.stack = make_controller(config.controller, p)
+        r = config.ros
+        self.stack = make_controller(config.controller, config.params)
         self._system_clock = clock
+        if time_base is None and not r.use_sim_time:
+            time_base = TimeBase(int(clock()) * 1_000_000_000)
+        self.time = time_base
         self._lock = threading.Condition()
+        self._step_lock = threading.Lock()                   # the stack: a tick or a retune
         self._odom: deque[OdometrySample] = deque()
-        self._scan: tuple[float, Any] | None = None        # (stamp, LaserScan) not yet used
+        self._scans: list[tuple[float, float, Any]] = []     # (stamp, arrival, LaserScan)
         self._scan_t = -math.inf                             # stamp of the last scan used
         self._obstacles: tuple[Circle, ...] = ()
         self._scan_seen: Any = None
-        self._people: list[Stamped] = []
+        self._people: list[tuple[Stamped, float]] = []       # (detection, arrival)
         self._sim_time: float | None = None
         self._seen: tuple[float, float] | None = None
         self.last: Command | None = None
         self.view: View | None = None
-        t = r.topics
-        reliable = Qos(depth=r.history_depth)
-        transport.subscribe(t.odom, "nav_msgs/msg/Odometry", self.on_odom, reliable)
+        self.tf = TransformBuffer() if r.use_tf else None
+        self.placer = Placer(r, self.tf)
+        self.warnings: list[str] = []                        # active problems, one line each
+        self._placing: dict[str, str] = {}                   # inputs that cannot be placed
+        self._said: set[str] = set()
+        self._graph_t = -math.inf
+        self._announced = False                              # the parameters, at the 1st tick
+        self._shown = ("", "", -math.inf)                    # status, reason, when logged
+        self.name = "/".join([r.namespace.rstrip("/"), r.node_name])
+        self.log = logging.getLogger(f"companion.node.{logger_name(r.node_name, r.namespace)}")
+        self.log.setLevel(logging.INFO)                      # as a ROS 2 node logs by default
+        self._subscribe()
+        self._advertise()
+
+    # -- wiring --------------------------------------------------------------------------
+
+    def _subscribe(self) -> None:
+        r, t, tr = self.config.ros, self.config.ros.topics, self.transport
+        tr.subscribe(t.odom, "nav_msgs/msg/Odometry", self.on_odom, r.qos.odom.qos())
         if t.scan:
-            transport.subscribe(t.scan, "sensor_msgs/msg/LaserScan", self.on_scan,
-                                reliable if r.scan_reliable else SENSOR_DATA)
-        transport.subscribe(t.person, convert.PERSON_TYPES[r.person_type], self.on_person,
-                            reliable)
+            tr.subscribe(t.scan, "sensor_msgs/msg/LaserScan", self.on_scan, r.qos.scan.qos())
+        self._person_types: list[str] = []
+        if r.person_type != "auto" or getattr(tr, "multi_type_topics", True):
+            for msgtype in person_types(r.person_type):
+                self._take_people(msgtype)
         if r.use_sim_time:
-            transport.subscribe(t.clock, "rosgraph_msgs/msg/Clock", self.on_clock,
-                                Qos(reliable=False, depth=1))
+            tr.subscribe(t.clock, "rosgraph_msgs/msg/Clock", self.on_clock,
+                         Qos(reliable=False, depth=1))
+        if self.tf is not None:
+            tr.subscribe(t.tf, "tf2_msgs/msg/TFMessage", lambda m: self.on_tf(m, False),
+                         Qos(reliable=False, depth=100))
+            tr.subscribe(t.tf_static, "tf2_msgs/msg/TFMessage", lambda m: self.on_tf(m, True),
+                         Qos(reliable=True, transient_local=True, depth=100))
+
+    def _take_people(self, msgtype: str) -> None:
+        """Subscribe to the person topic's ``msgtype``."""
+        r, kind = self.config.ros, convert.person_kind(msgtype)
+        self.transport.subscribe(r.topics.person, msgtype,
+                                 lambda msg: self.on_person(msg, kind), r.qos.person.qos())
+        self._person_types.append(msgtype)
+
+    def _find_people(self) -> None:
+        """``ros.person_type: auto`` on a transport whose topic takes one type (rclpy over
+        Fast DDS): the type of the first publisher of a person type the graph shows."""
+        topic = self.config.ros.topics.person
+        found = [e.msgtype for e in self.transport.publishers(topic)
+                 if e.msgtype in convert.PERSON_TYPES.values()]
+        if found:
+            self._take_people(found[0])
+            self.log.info("%s: taking %s, the type its publisher sends (ros.person_type "
+                          "auto)", topic, found[0])
+
+    def _advertise(self) -> None:
+        r, t, tr = self.config.ros, self.config.ros.topics, self.transport
         cmd_type = "geometry_msgs/msg/TwistStamped" if r.cmd_vel_stamped \
             else "geometry_msgs/msg/Twist"
-        self._cmd = transport.publisher(t.cmd_vel, cmd_type, DEFAULT)
-        self._status = transport.publisher(t.status, "diagnostic_msgs/msg/DiagnosticArray",
-                                           DEFAULT)
-        self._markers = transport.publisher(t.markers, "visualization_msgs/msg/MarkerArray",
-                                            DEFAULT) if t.markers else None
+        self._cmd = tr.publisher(t.cmd_vel, cmd_type, DEFAULT)
+        self._status = tr.publisher(t.status, "diagnostic_msgs/msg/DiagnosticArray", DEFAULT)
+        self._markers = tr.publisher(t.markers, "visualization_msgs/msg/MarkerArray",
+                                     DEFAULT) if t.markers else None
+        self._rosout = RosoutHandler(tr.typestore, tr.publisher(
+            "/rosout", "rcl_interfaces/msg/Log", ROSOUT), logger_name(r.node_name, r.namespace),
+            lambda: self.stamp(self.now() or 0.0))
+        self.log.addHandler(self._rosout)
+        events = tr.publisher("/parameter_events", "rcl_interfaces/msg/ParameterEvent",
+                              PARAMETER_EVENTS)
+        self.parameters = ParameterServer(self.name, self.config, tr.typestore, self._retune,
+                                          events, lambda: self.stamp(self.now() or 0.0))
+        for service, (srvtype, handler) in self.parameters.handlers().items():
+            tr.serve(f"{self.name}/{service}", srvtype, handler)
+
+    def close(self) -> None:
+        """Stop logging to /rosout (the transport is closed by its owner)."""
+        self.log.removeHandler(self._rosout)
+
+    def _retune(self, config: NodeConfig) -> None:
+        """A parameter changed while running: the stack runs on with the new parameters."""
+        with self._step_lock:
+            retune(self.stack, config.controller, config.params)
+            self.config = dataclasses.replace(self.config, params=config.params)
+        self.log.info("parameters changed: formation %.3f m at %.3f rad, v_max %.3g m/s",
+                      config.params.formation.distance, config.params.formation.bearing,
+                      config.params.robot.v_max)
 
     # -- inputs (any thread) -------------------------------------------------------------
 
+    def _base(self, stamp: Any) -> TimeBase:
+        """The node's time base, fixed by the first stamp it sees if not yet known."""
+        if self.time is None:
+            with self._lock:
+                if self.time is None:
+                    self.time = TimeBase.at(convert.stamp_ns(stamp))
+        return self.time
+
     def on_odom(self, msg: Any) -> None:
-        sample = convert.odometry_sample(msg)
+        sample = self.placer.odometry(convert.odometry_sample(msg, self._base(msg.header.stamp)),
+                                      msg.header.frame_id, msg.child_frame_id)
+        if isinstance(sample, str):
+            self._cannot_place("odom", sample)
+            return
         with self._lock:
             if self._odom and sample.t <= self._odom[-1].t:
                 self._odom.clear()        # time went back (a restarted bag or robot): restart
@@ -134,27 +207,43 @@ class CompanionNode:
                 self._odom.popleft()
 
     def on_scan(self, msg: Any) -> None:
+        t = self._base(msg.header.stamp).seconds(msg.header.stamp)
         with self._lock:
-            self._scan = (convert.seconds(msg.header.stamp), msg)
+            self._scans = [(t, self._arrival(), msg)]
 
-    def on_person(self, msg: Any) -> None:
-        people = convert.people_from(msg, self.config.ros.person_type)
+    def on_person(self, msg: Any, kind: str) -> None:
+        people = convert.people_from(msg, kind, self._base(msg.header.stamp))
         with self._lock:
-            self._people.extend(people)
+            self._people.extend((p, self._arrival()) for p in people)
 
     def on_clock(self, msg: Any) -> None:
+        t = self._base(msg.clock).seconds(msg.clock)
         with self._lock:
-            self._sim_time = convert.seconds(msg.clock)
+            self._sim_time = t
             self._lock.notify_all()
+
+    def on_tf(self, msg: Any, static: bool) -> None:
+        for ts in msg.transforms:
+            t = 0.0 if static else self._base(ts.header.stamp).seconds(ts.header.stamp)
+            self.tf.add(ts.header.frame_id, ts.child_frame_id, t,
+                        from_message(ts.transform), static)
+
+    def _arrival(self) -> float:
+        now = self.now()
+        return math.inf if now is None else now
 
     # -- the step ------------------------------------------------------------------------
 
     def now(self) -> float | None:
-        """The node's time (s): /clock with ``use_sim_time`` (None before the first), else
-        the system clock."""
+        """The node's time (s since its origin): /clock with ``use_sim_time`` (None before
+        the first), else the system clock."""
         if self.config.ros.use_sim_time:
             return self._sim_time
-        return self._system_clock()
+        return self._system_clock() - self.time.origin_ns * 1e-9
+
+    def stamp(self, t: float) -> Any:
+        """``builtin_interfaces/Time`` of the node's time ``t``."""
+        return (self.time or convert.ABSOLUTE).stamp(t)
 
     def wait_clock(self, until: float, timeout: float) -> float | None:
         """With ``use_sim_time``: wait up to ``timeout`` s of system time for /clock to reach
@@ -171,7 +260,7 @@ class CompanionNode:
             future = self._drop_future(now)
             odom = self._odom[-1] if self._odom else None
             people, self._people = self._people, []
-            scan, self._scan = self._scan, None
+            scans, self._scans = self._scans, []
             samples = deque(self._odom)
         stale = []
         if odom is None or now - odom.t > r.odom_timeout_s:
@@ -183,29 +272,35 @@ class CompanionNode:
             x, y, th = unicycle_step(odom.pose.x, odom.pose.y, odom.pose.theta,
                                      *odom.velocity, lead)
             robot, velocity = Pose(x, y, wrap_pi(th)), odom.velocity
-        detections = tuple(self._detection(s, samples) for s in people)
+        detections = self._place_people(people, samples, now)
         placed = [d for d in detections if d.frame == self.config.params.tracker.world_frame]
         if placed:                # the newest detection, until the estimate, hides the person
             self._seen = (placed[-1].x, placed[-1].y)      # from the LiDAR's obstacles
-        if scan is not None:
-            self._use_scan(*scan, samples)
+        for scan in scans:
+            self._use_scan(*scan, samples, now)
         if r.topics.scan and now - self._scan_t > r.scan_timeout_s:
             stale.append("scan")
         obs = Observation(now, robot, None, self._obstacles, self._scan_seen, velocity,
-                          detections, tuple(stale))
-        cmd = self.stack.step(obs)
+                          tuple(detections), tuple(stale))
+        with self._step_lock:
+            cmd = self.stack.step(obs)
         if future:
             cmd = with_reasons(cmd, future)
         self.last = cmd
         if cmd.estimate is not None:
             self._seen = (cmd.estimate.state.x, cmd.estimate.state.y)
         self._publish(now, robot, cmd)
+        if self.view is not None and self.last is cmd and not self._announced:
+            self._announced = True
+            self.parameters.announce()
+        self._watch(now, cmd)
         return cmd
 
     def stop(self, now: float) -> None:
         """Publish a zero velocity (the node's last word)."""
         r = self.config.ros
-        self._cmd(convert.twist_msg(0.0, 0.0, r.cmd_vel_stamped, now, r.base_frame))
+        self._cmd(convert.twist_msg(0.0, 0.0, r.cmd_vel_stamped, now, r.base_frame,
+                                    self.time or convert.ABSOLUTE))
 
     # -- the pieces ----------------------------------------------------------------------
 
@@ -217,50 +312,64 @@ class CompanionNode:
             reasons.append("odometry_future")
             while self._odom and self._odom[-1].t > ahead:
                 self._odom.pop()
-        if self._scan is not None and self._scan[0] > ahead:
+        if any(t > ahead for t, _, _ in self._scans):
             reasons.append("scan_future")
-            self._scan = None
+            self._scans = [s for s in self._scans if s[0] <= ahead]
         return reasons
 
-    def _use_scan(self, t: float, msg: Any, samples: deque[OdometrySample]) -> None:
-        """A new scan: placed with the odometry pose at its stamp and the LiDAR's mounting
-        pose; its obstacles replace the previous scan's."""
-        r = self.config.ros
-        robot = pose_at(samples, t)
-        if robot is None:
-            return                      # no odometry yet: the scan cannot be placed
-        sensor = convert.compose(robot, Pose(*r.lidar_mount))
+    def _place_people(self, people: list[tuple[Stamped, float]],
+                      samples: deque[OdometrySample], now: float) -> list:
+        """The detections placed in the odometry frame; those waiting for their transform
+        go back for the next period, at most ``ros.tf_wait_s`` after they arrived."""
+        world, wait = self.config.params.tracker.world_frame, self.config.ros.tf_wait_s
+        out, waiting = [], []
+        for s, arrived in people:
+            d = self.placer.detection(s, samples, world)
+            if d == WAIT:
+                if now - min(arrived, now) < wait:
+                    waiting.append((s, arrived))
+                    continue
+                d = PersonDetection(s.t, s.x, s.y, s.frame or "(no frame)")
+            if d.frame != world and samples:      # the tracker rejects it: detection_frame
+                self._cannot_place("person", f"detections in frame {s.frame or '(none)'}")
+            out.append(d)
+        if waiting:
+            with self._lock:
+                self._people[:0] = waiting
+        return out
+
+    def _use_scan(self, t: float, arrived: float, msg: Any, samples: deque[OdometrySample],
+                  now: float) -> None:
+        """A new scan placed at its stamp; its obstacles replace the previous scan's."""
+        where = self.placer.frame(msg.header.frame_id, t, samples)
+        if where == WAIT and now - min(arrived, now) < self.config.ros.tf_wait_s:
+            with self._lock:
+                self._scans = self._scans or [(t, arrived, msg)]
+            return
+        if where is None or where == WAIT:
+            if samples:
+                self._cannot_place("scan", f"scans in frame {msg.header.frame_id or '(none)'}")
+            return
         self._scan_t = t
-        self._scan_seen = convert.scan_from(msg, sensor)
+        self._scan_seen = convert.scan_from(msg, flat(where))
         self._obstacles = tuple(extract_obstacles(self._scan_seen, self._seen,
                                                   self.config.params.extractor))
 
-    def _detection(self, s: Stamped, samples: deque[OdometrySample]) -> PersonDetection:
-        """A person position as the tracker takes it: odometry-frame positions as they are,
-        positions in the robot's or the LiDAR's frame moved with the odometry pose at their
-        stamp; any other frame is passed on by name (the tracker rejects it)."""
-        r, tr = self.config.ros, self.config.params.tracker
-        extra = (s.covariance, s.heading, s.heading_std, s.speed, s.turn_rate, s.velocity_std)
-        if s.frame == r.odom_frame:
-            return PersonDetection(s.t, s.x, s.y, tr.world_frame, *extra)
-        mounts = {r.base_frame: Pose(0.0, 0.0, 0.0), r.lidar_frame: Pose(*r.lidar_mount)}
-        robot = pose_at(samples, s.t)
-        if s.frame not in mounts or robot is None:
-            return PersonDetection(s.t, s.x, s.y, s.frame or "(no frame)", *extra)
-        f = convert.compose(robot, mounts[s.frame])
-        c, si = math.cos(f.theta), math.sin(f.theta)
-        cov = s.covariance
-        if cov is not None:       # R C R^T
-            rot = np.array(((c, -si), (si, c)))
-            cov = tuple((rot @ np.reshape(cov, (2, 2)) @ rot.T).ravel().tolist())
-        heading = None if s.heading is None else wrap_pi(s.heading + f.theta)
-        return PersonDetection(s.t, f.x + c * s.x - si * s.y, f.y + si * s.x + c * s.y,
-                               tr.world_frame, cov, heading, s.heading_std, s.speed,
-                               s.turn_rate, s.velocity_std)
+    def _cannot_place(self, key: str, frame: str) -> None:
+        """Remember (until the next look at the graph) that inputs of ``key`` in ``frame``
+        could not be placed; a line naming the topic, the frame and what would place them."""
+        r = self.config.ros
+        line = (f"{frame} cannot be placed: no transform from it to {r.base_frame} or "
+                f"{r.odom_frame} on {r.topics.tf} or {r.topics.tf_static}") \
+            if key != "odom" else frame
+        if key == "scan":
+            line += " (or set ros.lidar_frame and ros.lidar_mount)"
+        self._placing[key] = f"{getattr(r.topics, key)}: {line}"
 
     def _publish(self, now: float, robot: Pose, cmd: Command) -> None:
         p, r = self.config.params, self.config.ros
-        self._cmd(convert.twist_msg(cmd.v, cmd.omega, r.cmd_vel_stamped, now, r.base_frame))
+        tb = self.time or convert.ABSOLUTE
+        self._cmd(convert.twist_msg(cmd.v, cmd.omega, r.cmd_vel_stamped, now, r.base_frame, tb))
         errors = slot = None
         e = cmd.estimate
         if e is not None and math.isfinite(robot.x):
@@ -268,36 +377,36 @@ class CompanionNode:
             errors = relative_state(robot.x, robot.y, robot.theta, w.x, w.y, w.theta,
                                     p.robot.d)
             slot = slot_point(w, p)
-        self._status(convert.status_msg(now, cmd, errors, r.node_name))
+        self._status(convert.status_msg(now, cmd, errors, r.node_name, tb, self.warnings))
         reach = tuple((ob, influence_range(ob, p.avoidance)) for ob in self._obstacles)
         self.view = View(now, robot, e, slot, reach)
         if self._markers is not None:
-            self._markers(convert.markers_msg(now, r.odom_frame, e, slot, reach))
+            self._markers(convert.markers_msg(now, r.odom_frame, e, slot, reach, tb))
 
-#: A period is due this much before its time: /clock carries nanoseconds and the schedule
-#: sums ``dt``, so a clock of exactly ``k * dt`` can read a hair before the summed time.
-_CLOCK_SLACK_S = 1e-6
+    def _watch(self, now: float, cmd: Command) -> None:
+        """The log of what changed: status changes, and each new problem on the graph or
+        with placing inputs (checked every :data:`GRAPH_PERIOD_S`)."""
+        status, reason, shown = self._shown
+        if cmd.status != status and (cmd.status == "stopped" or now - shown >= STATUS_LOG_S):
+            level = logging.WARNING if cmd.status == "stopped" else logging.INFO
+            self.log.log(level, "status %s%s", cmd.status, f": {cmd.reason}" * bool(cmd.reason))
+            self._shown = (cmd.status, cmd.reason, now)
+        if now - self._graph_t < GRAPH_PERIOD_S:
+            return
+        self._graph_t = now
+        lines = self._graph_problems() + list(self._placing.values())
+        self._placing = {}
+        for line in lines:
+            if line not in self._said:
+                self.log.warning("%s", line)
+                self._said.add(line)
+        self.warnings = lines
 
-
-def spin(node: CompanionNode, stop: threading.Event, limit_s: float | None = None) -> int:
-    """Tick ``node`` every period until ``stop`` is set (or ``limit_s`` s of the node's time
-    have passed), then publish a zero velocity; returns the number of ticks."""
-    dt, sim = node.config.params.dt, node.config.ros.use_sim_time
-    ticks, start, next_t = 0, None, None
-    while not stop.is_set():
-        due = -math.inf if next_t is None else next_t - _CLOCK_SLACK_S
-        now = node.wait_clock(due, 0.1) if sim else node.now()
-        if now is None or now < due:
-            if not sim:
-                stop.wait(min(due - now, dt))
-            continue
-        start = now if start is None else start
-        if limit_s is not None and now - start >= limit_s:
-            break
-        node.tick(now)
-        ticks += 1
-        next_t = (next_t if next_t is not None else now) + dt
-        if next_t < now - dt:           # fell behind by more than a period: do not burst
-            next_t = now + dt
-    node.stop(node.now() or 0.0)
-    return ticks
+    def _graph_problems(self) -> list[str]:
+        try:
+            if not self._person_types:
+                self._find_people()
+            return graph.input_problems(self.config.ros, self.transport.publishers)
+        except Exception as exc:    # discovery must not stop the node
+            self.log.debug("the graph could not be read: %s", exc)
+            return []

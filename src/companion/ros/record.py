@@ -16,7 +16,9 @@ from companion.control.avoidance import influence_range
 from companion.control.slot import slot_point
 from companion.ros import convert
 from companion.ros.bag import BagWriter, RecordingBus, RecordingTransport
+from companion.ros.convert import TimeBase
 from companion.ros.node import CompanionNode
+from companion.ros.parameters import config_mapping
 from companion.ros.scene import SCENE_TOPIC, SCENE_TYPE, Scene, scene_types
 from companion.ros.settings import NodeConfig, RosParams
 from companion.ros.sim_robot import Pacer, WireRobot, run_sim_robot
@@ -30,17 +32,10 @@ CUSTOM_KEY = "companion.parameters"
 RUN_PERSON_TYPE = "odometry"
 
 
-def config_mapping(config: NodeConfig) -> dict[str, Any]:
-    """``config`` as a ``ros__parameters`` mapping (:func:`config_from_mapping` reads it
-    back equal); stored in the bags companion records."""
-    return {**dataclasses.asdict(config.params), "ros": dataclasses.asdict(config.ros),
-            "controller": config.controller}
-
-
 def open_bag(path: Path, config: NodeConfig) -> BagWriter:
     """A bag at ``path`` that stores ``config`` in its metadata (``companion.parameters``)."""
     bag = BagWriter(path, config.ros.distro)
-    bag.writer.set_custom_data(CUSTOM_KEY, json.dumps(config_mapping(config)))
+    bag.set_custom_data(CUSTOM_KEY, json.dumps(config_mapping(config)))
     return bag
 
 
@@ -73,7 +68,7 @@ def record_run(spec: EpisodeSpec, config: NodeConfig, bag_path: Path) -> Log:
             node.tick(on_clock(t))
             v = node.view
             update = scene.update(v.t, v.robot, spec.person.state(t), v.estimate, v.slot,
-                                  v.obstacles)
+                                  v.obstacles, node.time)
             if update is not None:
                 bus.record(SCENE_TOPIC, SCENE_TYPE, update)
 
@@ -85,7 +80,7 @@ def record_run(spec: EpisodeSpec, config: NodeConfig, bag_path: Path) -> Log:
 
 
 def recording_sim_robot(spec: EpisodeSpec, transport: Transport, ros: RosParams,
-                        pacer: Pacer, epoch: float | None, bag_path: Path,
+                        pacer: Pacer, epoch_ns: int | None, bag_path: Path,
                         wait_s: float = 0.0,
                         lockstep_s: float = 0.0,
                         after: Callable[[float], None] | None = None
@@ -110,14 +105,16 @@ def recording_sim_robot(spec: EpisodeSpec, transport: Transport, ros: RosParams,
             odom = rec.last.get(t.odom)
             if odom is None:
                 return
-            person, sample = spec.person.state(k), convert.odometry_sample(odom)
+            # simulated time k on the robot's stamps: the odometry of sample k is stamped k
+            tb = TimeBase(convert.stamp_ns(odom.header.stamp) - int(round(k * 1e9)))
+            person, sample = spec.person.state(k), convert.odometry_sample(odom, tb)
             update = scene.update(sample.t, sample.pose, person, None, slot_point(person, p),
-                                  reach)
+                                  reach, tb)
             if update is not None:
                 rec.record(SCENE_TOPIC, SCENE_TYPE, update)
 
-        return run_sim_robot(spec, rec, ros, pacer, epoch, after=sample_done, wait_s=wait_s,
-                             lockstep_s=lockstep_s)
+        return run_sim_robot(spec, rec, ros, pacer, epoch_ns, after=sample_done,
+                             wait_s=wait_s, lockstep_s=lockstep_s)
     finally:
         bag.close()
 
@@ -126,19 +123,23 @@ class RecordedNode(CompanionNode):
     """The node, recording what it receives and publishes and the scene of its estimates in
     ``bag`` (log times on the node's clock)."""
 
-    def __init__(self, config: NodeConfig, transport: Transport, bag: BagWriter, **kw: Any):
+    def __init__(self, config: NodeConfig, transport: Transport, bag: BagWriter,
+                 log_clock: Callable[[], int | None] | None = None, **kw: Any):
+        """``log_clock()``: the log time (ns) to record at (default: the node's clock)."""
         self.bag = bag
-        self.recorder = RecordingTransport(transport, bag, clock=self._clock)
+        self.recorder = RecordingTransport(transport, bag, clock=log_clock or self._clock)
         self.scene = Scene(config.ros.odom_frame, config.params.robot.radius)
         super().__init__(config, self.recorder, **kw)
 
-    def _clock(self) -> float | None:
-        return self.now()
+    def _clock(self) -> int | None:
+        now = self.now()
+        return None if now is None or self.time is None else self.time.ns(now)
 
     def tick(self, now: float):
         cmd = super().tick(now)
         v = self.view
-        update = self.scene.update(now, v.robot, None, v.estimate, v.slot, v.obstacles)
+        update = self.scene.update(now, v.robot, None, v.estimate, v.slot, v.obstacles,
+                                   self.time)
         if update is not None:
             self.recorder.record(SCENE_TOPIC, SCENE_TYPE, update)
         return cmd

@@ -5,14 +5,17 @@ The odometry, scan and person messages of a rosbag2 bag (sqlite3 or MCAP) go to 
 tick times (the header stamps of /companion/status, else of a TwistStamped /cmd_vel, else every
 period from the first input), each after every input logged up to it. The replayed bag holds
 the inputs, what the node published, the scene, and the recorded command as
-``/cmd_vel_recorded``. Every problem with the bag is a one-line ConfigError naming the bag and
-the topic or record.
+``/cmd_vel_recorded``. The node's parameters are ``--params``, else those a companion
+recording stored in the bag, else the defaults with the side read from the data
+(:mod:`companion.ros.infer`). Every problem with the bag is a one-line ConfigError naming the
+bag and the topic or record.
 """
 
 from __future__ import annotations
 
 import json
 import math
+from collections import defaultdict
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -23,8 +26,11 @@ from companion import metrics
 from companion.errors import ConfigError
 from companion.model import relative_state
 from companion.ros import convert
-from companion.ros.bag import BagWriter, ns
-from companion.ros.record import CUSTOM_KEY, RecordedNode, config_mapping, open_bag
+from companion.ros.bag import BagWriter
+from companion.ros.convert import TimeBase, person_types
+from companion.ros.messages import typestore
+from companion.ros.parameters import config_mapping
+from companion.ros.record import CUSTOM_KEY, RecordedNode, open_bag
 from companion.ros.settings import NodeConfig, config_from_mapping
 from companion.ros.transport import MemoryBus, MemoryTransport
 from companion.types import Log
@@ -48,7 +54,10 @@ class BagReader:
         except Exception as exc:   # rosbags raises several kinds for a damaged bag
             raise ConfigError(f"{path}: not a readable rosbag2 bag "
                               f"({_first_line(exc)})") from None
-        self.topics = {c.topic: c for c in self.reader.connections}
+        self.by_topic: dict[str, list[Any]] = defaultdict(list)
+        for c in self.reader.connections:
+            self.by_topic[c.topic].append(c)
+        self.topics = {topic: cs[0] for topic, cs in self.by_topic.items()}
         if self.reader.message_count == 0:
             self.close()
             raise ConfigError(f"{path}: empty bag (no messages)")
@@ -60,31 +69,42 @@ class BagReader:
         text = custom.get(CUSTOM_KEY)
         return json.loads(text) if text else None
 
-    def connection(self, topic: str, types: tuple[str, ...], what: str) -> Any:
-        c = self.topics.get(topic)
-        if c is None:
+    def connections(self, topic: str) -> list[Any]:
+        return self.by_topic.get(topic, [])
+
+    def connection(self, topic: str, types: tuple[str, ...], what: str) -> list[Any]:
+        """The connections of ``topic`` of the ``types`` the node takes (at least one)."""
+        cs = self.by_topic.get(topic)
+        if not cs:
             raise ConfigError(f"{self.path}: topic {topic} ({what}): not in the bag; it has "
                               f"{', '.join(sorted(self.topics)) or 'no topics'}")
-        if c.msgtype not in types:
-            raise ConfigError(f"{self.path}: topic {topic}: message type {c.msgtype}, "
-                              f"expected {' or '.join(types)} ({what})")
-        return c
+        ours = [c for c in cs if c.msgtype in types]
+        if not ours:
+            raise ConfigError(f"{self.path}: topic {topic}: message type "
+                              f"{', '.join(c.msgtype for c in cs)}, expected "
+                              f"{' or '.join(types)} ({what})")
+        return ours
 
     def messages(self, connections: list[Any]) -> Iterator[tuple[str, int, Any]]:
         """(topic, log time ns, message) in log-time order; a record that cannot be read or
         decoded is a ConfigError naming it."""
-        ts = self.typestore
+        for c, t, msg in self.records(connections):
+            yield c.topic, t, msg
+
+    def records(self, connections: list[Any]) -> Iterator[tuple[Any, int, Any]]:
+        """(connection, log time ns, message) in log-time order (see :meth:`messages`)."""
+        ts = self.typestore or typestore()
         count = 0
-        seen = dict.fromkeys((c.topic for c in connections), 0)
+        seen = dict.fromkeys((c.id for c in connections), 0)
         it = self.reader.messages(connections=connections)
         while True:
             try:
                 c, t, data = next(it)
             except StopIteration:
                 for c in connections:     # fewer messages than the bag's index: damaged
-                    if seen[c.topic] != c.msgcount:
+                    if seen[c.id] != c.msgcount:
                         raise ConfigError(
-                            f"{self.path}: topic {c.topic}: {seen[c.topic]} of the "
+                            f"{self.path}: topic {c.topic}: {seen[c.id]} of the "
                             f"{c.msgcount} messages the bag lists could be read; a record is "
                             f"truncated or corrupt") from None
                 return
@@ -92,14 +112,14 @@ class BagReader:
                 raise ConfigError(f"{self.path}: record after message {count} cannot be read "
                                   f"({_first_line(exc)}); truncated or corrupt") from None
             count += 1
-            seen[c.topic] += 1
+            seen[c.id] += 1
             try:
                 msg = ts.deserialize_cdr(data, c.msgtype)
             except Exception as exc:
                 raise ConfigError(f"{self.path}: topic {c.topic}: message at log time "
                                   f"{t * 1e-9:.9f} s cannot be decoded as {c.msgtype} "
                                   f"({_first_line(exc)})") from None
-            yield c.topic, t, msg
+            yield c, t, msg
 
     def close(self) -> None:
         self.reader.close()
@@ -110,25 +130,37 @@ def _first_line(exc: Exception) -> str:
     return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
 
 
-def bag_config(bag: Path, params: NodeConfig | None, controller: str | None) -> NodeConfig:
-    """The node configuration of a replay: ``params`` if given, else what a companion
-    recording stored in the bag, else every default; ``controller`` replaces its
+def bag_config(bag: Path, params: NodeConfig | None, controller: str | None
+               ) -> tuple[NodeConfig, str]:
+    """The node configuration of a replay and a note on where it came from: ``params`` if
+    given, else what a companion recording stored in the bag, else the defaults with the side
+    read from the bag (:func:`companion.ros.infer.infer_side`); ``controller`` replaces its
     controller."""
+    note = ""
     if params is None:
         reader = BagReader(bag)
         try:
             stored = reader.recorded_config()
+            if stored:
+                params = config_from_mapping(stored, f"{bag}: metadata {CUSTOM_KEY}: ")
+            else:
+                from companion.ros.infer import infer_side
+
+                params = config_from_mapping({})
+                side, mean = infer_side(reader, params)
+                params = config_from_mapping({"formation": {"bearing": side}})
+                note = (f"no companion parameters in the bag: the defaults, with the side "
+                        f"read from the data ({side}: mean bearing {mean:.2f} rad) and the "
+                        f"person topic's type; --params FILE.yaml gives others")
         finally:
             reader.close()
-        params = config_from_mapping(stored, f"{bag}: metadata {CUSTOM_KEY}: ") if stored \
-            else config_from_mapping({})
     if controller:
         params = config_from_mapping({**config_mapping(params), "controller": controller})
-    return params
+    return params, note
 
 
-def _ticks(reader: BagReader, config: NodeConfig, inputs: list[Any]) -> list[float]:
-    """The tick times (s) of the recording (see the module docstring)."""
+def _ticks(reader: BagReader, config: NodeConfig, inputs: list[Any]) -> list[int]:
+    """The tick times (ns) of the recording (see the module docstring)."""
     t = config.ros.topics
     status = reader.topics.get(t.status)
     source = None
@@ -138,13 +170,13 @@ def _ticks(reader: BagReader, config: NodeConfig, inputs: list[Any]) -> list[flo
             reader.topics[t.cmd_vel].msgtype == "geometry_msgs/msg/TwistStamped":
         source = reader.topics[t.cmd_vel]
     if source is not None:
-        stamps = [convert.seconds(m.header.stamp) for _, _, m in reader.messages([source])]
+        stamps = [convert.stamp_ns(m.header.stamp) for _, _, m in reader.messages([source])]
         if stamps:
             return sorted(set(stamps))
     times = [lt for _, lt, _ in reader.messages(inputs)]
-    first, last = min(times) * 1e-9, max(times) * 1e-9
-    dt = config.params.dt
-    return [first + k * dt for k in range(int(math.floor((last - first) / dt + 1e-9)) + 1)]
+    first, last = min(times), max(times)
+    dt = int(round(config.params.dt * 1e9))
+    return list(range(first, last + 1, dt))
 
 
 def replay(bag: Path, config: NodeConfig, out_bag: Path) -> dict[str, Any]:
@@ -154,12 +186,11 @@ def replay(bag: Path, config: NodeConfig, out_bag: Path) -> dict[str, Any]:
     r = config.ros
     try:
         t = r.topics
-        wanted = [(t.odom, ("nav_msgs/msg/Odometry",), "odometry"),
-                  (t.person, (convert.PERSON_TYPES[r.person_type],),
-                   f"person detections, ros.person_type {r.person_type}")]
+        inputs = reader.connection(t.odom, ("nav_msgs/msg/Odometry",), "odometry")
+        inputs += reader.connection(t.person, person_types(r.person_type),
+                                    f"person detections, ros.person_type {r.person_type}")
         if t.scan:
-            wanted.append((t.scan, ("sensor_msgs/msg/LaserScan",), "LiDAR scans"))
-        inputs = [reader.connection(topic, types, what) for topic, types, what in wanted]
+            inputs += reader.connection(t.scan, ("sensor_msgs/msg/LaserScan",), "LiDAR scans")
         recorded = reader.topics.get(t.cmd_vel)
         if recorded is not None:
             reader.connection(t.cmd_vel, _TWISTS, "velocity commands")
@@ -181,21 +212,22 @@ def _run(reader: BagReader, config: NodeConfig, inputs: list[Any], recorded: Any
             raise ConfigError(f"{reader.path}: topic {c.topic}: no messages")
     ticks = _ticks(reader, config, inputs)
     ros = r.__class__(**{**r.__dict__, "use_sim_time": False})
-    now = [ticks[0]]
+    now = [ticks[0]]                         # ns: the log time the node sees things at
     bus = MemoryBus()
     node = RecordedNode(NodeConfig(p, ros, config.controller),
-                        MemoryTransport(bus, out.typestore), out, clock=lambda: now[0])
+                        MemoryTransport(bus, out.typestore), out, log_clock=lambda: now[0],
+                        clock=lambda: now[0] * 1e-9, time_base=TimeBase.at(ticks[0]))
     feed = MemoryTransport(bus, out.typestore)
-    publishers = {c.topic: feed.publisher(c.topic, c.msgtype) for c in inputs}
-    rows: list[tuple[float, float, float, float, float, float]] = []
+    publishers = {c.id: feed.publisher(c.topic, c.msgtype) for c in inputs}
+    rows: list[tuple[int, float, float, float, float, float]] = []
     recorded_cmds: list[tuple[int, float, float]] = []
     k = 0
 
     def tick_until(limit_ns: int | None) -> None:
         nonlocal k
-        while k < len(ticks) and (limit_ns is None or ns(ticks[k]) < limit_ns):
+        while k < len(ticks) and (limit_ns is None or ticks[k] < limit_ns):
             now[0] = ticks[k]
-            cmd = node.tick(ticks[k])
+            cmd = node.tick(node.time.since(ticks[k]))
             v = node.view
             e = (math.nan,) * 3
             if v.estimate is not None and math.isfinite(v.robot.x):
@@ -206,27 +238,29 @@ def _run(reader: BagReader, config: NodeConfig, inputs: list[Any], recorded: Any
             k += 1
 
     streams = inputs + ([recorded] if recorded is not None else [])
-    for topic, log_ns, msg in reader.messages(streams):
-        if recorded is not None and topic == recorded.topic:
+    for c, log_ns, msg in reader.records(streams):
+        if recorded is not None and c.id == recorded.id:
             tick_until(log_ns + 1)  # the command a tick published is logged at or after it
-            out.write(topic + RECORDED_SUFFIX, recorded.msgtype, log_ns, msg)
+            out.write(c.topic + RECORDED_SUFFIX, c.msgtype, log_ns, msg)
             recorded_cmds.append((log_ns, *convert.twist_velocity(msg)))
             continue
         tick_until(log_ns)          # an input logged at a tick's time came before the tick
-        now[0] = log_ns * 1e-9
-        publishers[topic](msg)
+        now[0] = log_ns
+        publishers[c.id](msg)
     tick_until(None)
+    node.close()
     return _metrics(rows, recorded_cmds, config)
 
 
 def _metrics(rows: list[tuple], recorded: list[tuple[int, float, float]],
              config: NodeConfig) -> dict[str, Any]:
-    a = np.array(rows, dtype=float).reshape(-1, 6)
+    times = [row[0] for row in rows]
+    a = np.array([row[1:] for row in rows], dtype=float).reshape(-1, 5)
     f = config.params.formation
-    seen = np.isfinite(a[:, 3])
+    seen = np.isfinite(a[:, 2])
     n = int(seen.sum())
-    log = Log({"rho": a[seen, 3], "rho_d": np.full(n, f.distance), "alpha": a[seen, 4],
-               "alpha_d": np.full(n, f.bearing), "beta": a[seen, 5],
+    log = Log({"rho": a[seen, 2], "rho_d": np.full(n, f.distance), "alpha": a[seen, 3],
+               "alpha_d": np.full(n, f.bearing), "beta": a[seen, 4],
                "beta_ref": np.zeros(n)})
     e = metrics.errors(log)
     out: dict[str, Any] = {"controller": config.controller, "ticks": len(rows),
@@ -235,7 +269,6 @@ def _metrics(rows: list[tuple], recorded: list[tuple[int, float, float]],
         out[f"rmse_{key}_{unit}"] = float(np.sqrt(np.mean(e[key] ** 2))) if n else None
     # The recorded command of a tick: the first /cmd_vel logged at or after it, before the
     # next tick.
-    times = [ns(t) for t in a[:, 0]]
     pairs = []
     j = 0
     for i, t in enumerate(times):
@@ -243,7 +276,7 @@ def _metrics(rows: list[tuple], recorded: list[tuple[int, float, float]],
             j += 1
         end = times[i + 1] if i + 1 < len(times) else None
         if j < len(recorded) and (end is None or recorded[j][0] < end):
-            pairs.append((a[i, 1] - recorded[j][1], a[i, 2] - recorded[j][2]))
+            pairs.append((a[i, 0] - recorded[j][1], a[i, 1] - recorded[j][2]))
     d = np.array(pairs, dtype=float).reshape(-1, 2)
     out["recorded_commands"] = len(recorded)
     out["paired_commands"] = len(pairs)

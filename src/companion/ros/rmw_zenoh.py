@@ -18,12 +18,12 @@ from typing import Any
 import xxhash
 
 from companion.errors import ConfigError
-from companion.ros.messages import dds_type_name, type_hash
+from companion.ros.messages import dds_type_name, ros_type_name, service_type_hash, type_hash
 from companion.ros.transport import Qos
 
 # src/detail/liveliness_utils.cpp: ADMIN_SPACE, the entity strings and SLASH_REPLACEMENT.
 ADMIN_SPACE = "@ros2_lv"
-NODE, PUBLISHER, SUBSCRIPTION = "NN", "MP", "MS"
+NODE, PUBLISHER, SUBSCRIPTION, SERVICE = "NN", "MP", "MS", "SS"
 #: rmw_zenoh's default depth (src/detail/qos.cpp, RMW_ZENOH_DEFAULT_HISTORY_DEPTH): a depth of 0
 #: becomes 42, and a depth of 42 is left out of the QoS string.
 DEFAULT_DEPTH = 42
@@ -66,6 +66,11 @@ def wire_type_hash(msgtype: str, distro: str) -> str:
     return NO_TYPE_HASH if distro == "humble" else type_hash(msgtype, distro)
 
 
+def wire_service_hash(srvtype: str, distro: str) -> str:
+    """The type hash rmw_zenoh of ``distro`` puts in a service's keys (the service type's)."""
+    return NO_TYPE_HASH if distro == "humble" else service_type_hash(srvtype, distro)
+
+
 def topic_keyexpr(domain_id: int, topic: str, msgtype: str, hash_: str) -> str:
     """The key expression samples of ``topic`` travel on:
     ``<domain>/<topic without its leading and trailing '/'>/<DDS type name>/<type hash>``
@@ -91,6 +96,29 @@ def qos_keyexpr(qos: Qos) -> str:
     durability = "1" if qos.transient_local else ""
     depth = "" if qos.depth in (0, DEFAULT_DEPTH) else str(qos.depth)
     return f"{reliability}:{durability}:,{depth}:,:,:,,"
+
+
+def parse_qos(text: str) -> Qos | None:
+    """The reliability, durability and depth of a token's QoS chunk (:func:`qos_keyexpr`);
+    None if it is not one (src/detail/liveliness_utils.cpp, ``keyexpr_to_qos``)."""
+    parts = text.split(":")
+    if len(parts) < 6 or "," not in parts[2]:
+        return None
+    depth = parts[2].split(",")[1]
+    return Qos(reliable=parts[0] != "2", transient_local=parts[1] == "1",
+               depth=int(depth) if depth.isdigit() else DEFAULT_DEPTH)
+
+
+def parse_token(key: str) -> tuple[str, str, str, str, Qos] | None:
+    """``(zid, kind, topic, ROS message type, QoS)`` of a publisher's, subscription's or
+    service's liveliness token; None for a node's token or a key that is not a token."""
+    parts = key.split("/")
+    if len(parts) != 13 or parts[0] != ADMIN_SPACE or parts[5] == NODE:
+        return None
+    qos = parse_qos(parts[12])
+    if qos is None:
+        return None
+    return (parts[2], parts[5], parts[9].replace("%", "/"), ros_type_name(parts[10]), qos)
 
 
 @dataclass(frozen=True)

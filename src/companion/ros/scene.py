@@ -17,7 +17,7 @@ from typing import Any
 
 from rosbags.typesys import get_types_from_msg
 
-from companion.ros.convert import point, pose_msg, time_msg
+from companion.ros.convert import ABSOLUTE, TimeBase, point, pose_msg
 from companion.ros.messages import make, typestore
 from companion.types import Circle, Obstacle, PersonEstimate, PersonState, Pose
 
@@ -107,8 +107,8 @@ def _line(points: Sequence[tuple[float, float]], color: str, width: float = 0.03
                 color=_color(color))
 
 
-def _entity(t: float, frame: str, name: str, **primitives: Any) -> Any:
-    return make("foxglove_msgs/msg/SceneEntity", timestamp=time_msg(t), frame_id=frame,
+def _entity(t: float, frame: str, name: str, tb: TimeBase = ABSOLUTE, **primitives: Any) -> Any:
+    return make("foxglove_msgs/msg/SceneEntity", timestamp=tb.stamp(t), frame_id=frame,
                 id=name, **primitives)
 
 
@@ -131,7 +131,9 @@ class Scene:
 
     def update(self, t: float, robot: Pose, person: PersonState | None,
                estimate: PersonEstimate | None, slot: tuple[float, float] | None,
-               obstacles: Sequence[tuple[Obstacle, float]]) -> Any | None:
+               obstacles: Sequence[tuple[Obstacle, float]], tb: TimeBase = ABSOLUTE
+               ) -> Any | None:
+        """The update at ``t`` (s since ``tb``'s origin), or None between updates."""
         if t >= self._next_point - 1e-9 and math.isfinite(robot.x):
             self._next_point = t + self.spacing
             self.paths["robot_path"].append((robot.x, robot.y))
@@ -144,19 +146,19 @@ class Scene:
         f = self.frame
         entities = []
         if math.isfinite(robot.x):
-            entities.append(_entity(t, f, "robot", cylinders=[
+            entities.append(_entity(t, f, "robot", tb, cylinders=[
                 _cylinder(robot.x, robot.y, 2 * self.radius, 0.3, "robot")],
                 arrows=[_arrow(robot, 1.2 * self.radius + 0.2, "heading", 0.35)]))
         if person is not None:
-            entities.append(_entity(t, f, "person", cylinders=[
+            entities.append(_entity(t, f, "person", tb, cylinders=[
                 _cylinder(person.x, person.y, 0.4, 1.7, "person")],
                 arrows=[_arrow(Pose(person.x, person.y, person.theta), 0.6, "person", 1.8)]))
         if estimate is not None:
             w = estimate.walker
-            entities.append(_entity(t, f, "person_estimate", arrows=[
+            entities.append(_entity(t, f, "person_estimate", tb, arrows=[
                 _arrow(Pose(w.x, w.y, w.theta), 0.6, "estimate", 0.05)]))
         if slot is not None:
-            entities.append(_entity(t, f, "slot", cylinders=[
+            entities.append(_entity(t, f, "slot", tb, cylinders=[
                 _cylinder(*slot, 0.3, 0.05, "slot")]))
         prims: dict[str, list] = {"cylinders": [], "lines": []}
         for ob, reach in obstacles:
@@ -168,8 +170,8 @@ class Scene:
                 prims["lines"] += [_line([(ob.x0, ob.y0), (ob.x1, ob.y1)], "obstacle", 0.1),
                                    _line([(ob.x0, ob.y0), (ob.x1, ob.y1)], "influence",
                                          2 * reach)]
-        entities.append(_entity(t, f, "obstacles", **prims))
-        entities.append(_entity(t, f, "paths", lines=[
+        entities.append(_entity(t, f, "obstacles", tb, **prims))
+        entities.append(_entity(t, f, "paths", tb, lines=[
             _line(list(p), name) for name, p in self.paths.items() if len(p) > 1]))
         return make(SCENE_TYPE, entities=entities)
 

@@ -29,6 +29,7 @@ from companion.errors import CompanionError, ConfigError
 from companion.params import Params, params_from_mapping
 from companion.ros.convert import PERSON_TYPES
 from companion.ros.messages import DISTROS
+from companion.ros.transport import Qos
 
 
 @ranged("a ROS node name")
@@ -84,6 +85,37 @@ class Topics(Validated):
     markers: str = param("/companion/markers", "", "visualization_msgs/MarkerArray out "
                          "('' : none)", _topic)
     clock: str = param("/clock", "", "rosgraph_msgs/Clock in, with use_sim_time", _topic)
+    tf: str = param("/tf", "", "tf2_msgs/TFMessage in (with use_tf)", _topic)
+    tf_static: str = param("/tf_static", "", "tf2_msgs/TFMessage in, transient local (with "
+                           "use_tf)", _topic)
+
+
+@dataclasses.dataclass(frozen=True)
+class TopicQos(Validated):
+    """The QoS of one input topic's subscription (ROS 2's names and meanings)."""
+
+    reliability: str = param("best_effort", "", "'best_effort' takes reliable and best-effort "
+                             "publishers; 'reliable' takes reliable ones only",
+                             choices=("best_effort", "reliable"))
+    durability: str = param("volatile", "", "'transient_local' takes transient-local "
+                            "publishers only and gets their stored messages",
+                            choices=("volatile", "transient_local"))
+    depth: int = param(10, "", "history depth (keep last)", _depth)
+
+    def qos(self) -> Qos:
+        return Qos(self.reliability == "reliable", self.durability == "transient_local",
+                   self.depth)
+
+
+@dataclasses.dataclass(frozen=True)
+class InputQos(Validated):
+    """The QoS of each input's subscription; the defaults are ROS 2's conventions (sensor data
+    for scans, and best effort for odometry and people, which accepts both kinds of
+    publisher)."""
+
+    odom: TopicQos = param(TopicQos(), "", "")
+    scan: TopicQos = param(TopicQos(depth=5), "", "")
+    person: TopicQos = param(TopicQos(), "", "")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,15 +124,19 @@ class RosParams(Validated):
 
     node_name: str = param("companion", "", "the node's name", _node_name)
     namespace: str = param("/", "", "the node's namespace", _namespace)
-    transport: str = param("dds", "", "wire protocol", choices=("dds", "zenoh"))
+    transport: str = param("dds", "", "wire protocol: DDS or Zenoh spoken by companion, or "
+                           "rclpy (the robot's own ROS 2; docs/ros2.md)",
+                           choices=("dds", "zenoh", "rclpy"))
     distro: str = param("jazzy", "", "ROS 2 distribution of the message types and type "
                         "hashes", choices=tuple(DISTROS))
-    domain_id: int = param(0, "", "ROS_DOMAIN_ID", _domain)
+    domain_id: int | None = param(None, "", "DDS domain; None: $ROS_DOMAIN_ID (0 if unset), "
+                                 "as every ROS 2 node", _domain)
     zenoh_connect: str = param("tcp/127.0.0.1:7447", "", "Zenoh endpoint to connect to (the "
                                "zenohd router of rmw_zenoh)", endpoint_problem)
     use_sim_time: bool = param(False, "", "take time from /clock instead of the system clock")
-    person_type: str = param("point", "", "type of the person topic: PointStamped, PoseStamped, "
-                             "PoseArray or Odometry (docs/ros2.md)", choices=tuple(PERSON_TYPES))
+    person_type: str = param("auto", "", "type of the person topic: PointStamped, PoseStamped, "
+                             "PoseArray or Odometry; 'auto': any of them (docs/ros2.md)",
+                             choices=("auto", *PERSON_TYPES))
     cmd_vel_stamped: bool = param(False, "", "publish TwistStamped instead of Twist")
     odom_frame: str = param("odom", "", "frame of the odometry pose and of world-frame "
                             "detections")
@@ -112,13 +148,20 @@ class RosParams(Validated):
                                   between(1e-3, 10.0, "s"))
     scan_timeout_s: float = param(0.5, "s", "no scan for longer than this stops the robot",
                                   between(1e-3, 10.0, "s"))
-    scan_reliable: bool = param(False, "", "subscribe to the scan reliably (default: best "
-                                "effort, as drivers publish it)")
-    history_depth: int = param(10, "", "QoS history depth of reliable topics", _depth)
+    qos: InputQos = param(InputQos(), "", "")
+    use_tf: bool = param(True, "", "place detections, scans and odometry through /tf and "
+                         "/tf_static (ros.lidar_mount stays the fallback)")
+    tf_wait_s: float = param(0.1, "s", "how long an input waits for the transform at its stamp",
+                             between(0.0, 2.0, "s"))
     odometry_buffer_s: float = param(2.0, "s", "how much odometry is kept to place late "
                                      "detections and scans",
                                      between(0.1, 60.0, "s"))
     topics: Topics = param(Topics(), "", "")
+
+
+#: Keys of earlier versions of the ``ros`` section and what replaced them.
+MOVED = {"scan_reliable": "ros.qos.scan.reliability",
+         "history_depth": "ros.qos.<topic>.depth"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -156,12 +199,21 @@ def config_from_mapping(parameters: Mapping[str, Any], where: str = "") -> NodeC
     """The node's configuration from a ``ros__parameters`` mapping; errors start with
     ``where``."""
     tree = _nest(parameters, where)
+    if "use_sim_time" in tree:     # every ROS 2 node's own parameter: ros.use_sim_time here
+        ros_tree = tree.setdefault("ros", {})
+        if not isinstance(ros_tree, dict) or "use_sim_time" in ros_tree:
+            raise ConfigError(f"{where}use_sim_time: given with ros.use_sim_time; give one")
+        ros_tree["use_sim_time"] = tree.pop("use_sim_time")
     controller = tree.pop("controller", "lqr")
     try:
         lookup(str(controller))
     except ConfigError as exc:
         raise ConfigError(f"{where}{exc}") from None
-    ros = build(RosParams, tree.pop("ros", {}) or {}, prefix=f"{where}ros.")
+    ros_tree = tree.pop("ros", {}) or {}
+    for old, new in MOVED.items():
+        if isinstance(ros_tree, Mapping) and old in ros_tree:
+            raise ConfigError(f"{where}ros.{old}: replaced by {new} (docs/ros2.md)")
+    ros = build(RosParams, ros_tree, prefix=f"{where}ros.")
     params = params_from_mapping(tree, prefix=where)
     try:                  # weights without a stabilising gain: an error now, naming the keys
         make_controller(controller, params)

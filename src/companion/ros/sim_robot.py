@@ -15,7 +15,6 @@ that period's /clock before the plant moves, as an in-process run does; docs/ros
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import threading
 import time
@@ -24,12 +23,18 @@ from typing import Any
 
 from companion.params import Params
 from companion.ros import convert
+from companion.ros.convert import Stamped, TimeBase
 from companion.ros.settings import RosParams
 from companion.ros.transport import DEFAULT, SENSOR_DATA, Qos, Transport
 from companion.sim.episode import run_episode, timed_out
 from companion.sim.runner import EpisodeSpec
 from companion.sim.sensing import LidarPerception
 from companion.types import Command, Log, Observation
+
+#: Where simulated time starts on the wire: 2000-01-01T00:00:00Z, in ns since 1970. Stamps,
+#: /clock and a bag's log times of a simulated run count from it (a bag of a simulated run
+#: starts on that day, not at 0, which tools show as 1970).
+SIM_EPOCH_NS = 946_684_800 * 1_000_000_000
 
 
 class Interrupted(Exception):
@@ -60,23 +65,25 @@ class WireRobot:
     takes_detections = True
 
     def __init__(self, transport: Transport, ros: RosParams, params: Params, pacer: Pacer,
-                 epoch: float | None = 0.0, after: Callable[[float], None] | None = None,
-                 lockstep_s: float = 0.0):
-        """``epoch`` is added to simulated time in stamps (None: the system clock at the first
-        sample, after the wait for a node; with ``use_sim_time`` one period, so that the
-        node's tick on the waiting phase's /clock of 0 is followed by one at every sample);
+                 epoch_ns: int | None = SIM_EPOCH_NS,
+                 after: Callable[[float], None] | None = None, lockstep_s: float = 0.0):
+        """``epoch_ns`` is the stamp of simulated time 0 (None: the system clock at the first
+        sample, after the wait for a node; with ``use_sim_time`` one period after
+        :data:`SIM_EPOCH_NS`, so that the node's tick on the waiting phase's /clock at the
+        epoch is followed by one at every sample);
         ``after(t)`` runs once the sample's messages are out (a lock-step test ticks the node
         there); ``lockstep_s`` > 0 waits up to that long (wall time) each period for the
         node's answer to the period's /clock."""
-        self.ros, self.params, self.pacer, self.epoch, self.after = ros, params, pacer, \
-            epoch, after
+        self.ros, self.params, self.pacer, self.after = ros, params, pacer, after
+        self.time = None if epoch_ns is None else TimeBase(epoch_ns)
         self.lockstep_s = lockstep_s if ros.use_sim_time else 0.0
         t = ros.topics
         self._odom = transport.publisher(t.odom, "nav_msgs/msg/Odometry", DEFAULT)
         self._tf = transport.publisher("/tf", "tf2_msgs/msg/TFMessage", Qos(depth=100))
         self._scan = transport.publisher(t.scan, "sensor_msgs/msg/LaserScan", SENSOR_DATA) \
             if t.scan else None
-        kind = ros.person_type
+        kind = "point" if ros.person_type == "auto" else ros.person_type   # a robot sends one
+        self.person_type = kind
         self._person = transport.publisher(t.person, convert.PERSON_TYPES[kind], DEFAULT)
         # /clock reliable (readers may be best effort): on Zenoh the reliable and the
         # best-effort samples travel apart, and a clock must not overtake its sample's data
@@ -113,8 +120,8 @@ class WireRobot:
         at the start meanwhile, so the node can tick); True if one came."""
         end = time.monotonic() + timeout
         while time.monotonic() < end:
-            if self._clock is not None:
-                self._clock(convert.clock_msg(max(0.0, (self.epoch or 0.0) - self.params.dt)))
+            if self._clock is not None and self.time is not None:
+                self._clock(convert.clock_msg(-self.params.dt, self.time))
             with self._lock:
                 if self.commands:
                     self._received, self.commands = None, 0
@@ -133,33 +140,31 @@ class WireRobot:
 
     def step(self, obs: Observation) -> Command:
         self.pacer.wait(obs.t)
-        if self.epoch is None:
-            self.epoch = time.time() - obs.t
-        stamp = self.epoch + obs.t
+        if self.time is None:
+            self.time = TimeBase(time.time_ns() - int(round(obs.t * 1e9)))
+        tb, t = self.time, obs.t
         r = self.ros
         velocity = obs.robot_velocity or (0.0, 0.0)
-        self._odom(convert.odometry_msg(stamp, obs.robot, velocity, r.odom_frame,
-                                        r.base_frame))
-        self._tf(convert.tf_msg(stamp, obs.robot, r.odom_frame, r.base_frame))
+        self._odom(convert.odometry_msg(t, obs.robot, velocity, r.odom_frame, r.base_frame, tb))
+        self._tf(convert.tf_msg(t, obs.robot, r.odom_frame, r.base_frame, tb))
         if self._scan is not None and obs.scan is not None and obs.scan is not self._last_scan:
             self._last_scan = obs.scan
             period = 1.0 / self.params.sensing.lidar_rate_hz
-            self._scan(convert.scan_msg(stamp, obs.scan, r.lidar_frame, period))
+            self._scan(convert.scan_msg(t, obs.scan, r.lidar_frame, period, tb))
         if obs.detections:
             frames = {self.params.tracker.world_frame: r.odom_frame,
                       self.params.tracker.robot_frame: r.base_frame}
-            people = [dataclasses.replace(d, t=self.epoch + d.t,
-                                          frame=frames.get(d.frame, d.frame))
-                      for d in obs.detections]
-            if r.person_type == "pose_array":
+            people = [Stamped.of(d, d.t, frames.get(d.frame, d.frame)) for d in obs.detections]
+            if self.person_type == "pose_array":
                 for frame in dict.fromkeys(p.frame for p in people):
                     group = [p for p in people if p.frame == frame]
-                    self._person(convert.person_msg(group, "pose_array", group[-1].t, frame))
+                    self._person(convert.person_msg(group, "pose_array", group[-1].t, frame,
+                                                    tb))
             else:
                 for p in people:
-                    self._person(convert.person_msg([p], r.person_type, p.t, p.frame))
+                    self._person(convert.person_msg([p], self.person_type, p.t, p.frame, tb))
         if self._clock is not None:        # last: a node on /clock ticks with the sample in
-            self._clock(convert.clock_msg(stamp))
+            self._clock(convert.clock_msg(t, tb))
         if self.after is not None:
             self.after(obs.t)
         with self._lock:
@@ -178,14 +183,15 @@ class WireRobot:
 
 
 def run_sim_robot(spec: EpisodeSpec, transport: Transport, ros: RosParams, pacer: Pacer,
-                  epoch: float | None = 0.0, after: Callable[[float], None] | None = None,
+                  epoch_ns: int | None = SIM_EPOCH_NS,
+                  after: Callable[[float], None] | None = None,
                   wait_s: float = 0.0, lockstep_s: float = 0.0) -> tuple[Log, WireRobot]:
     """Run ``spec`` with its controller on the wire, after waiting up to ``wait_s`` s for a
     node's first command; the robot senses with a LiDAR (a ROS robot publishes /scan) and
     starts as ``companion run`` starts it (in the slot at the walking speed unless the
     scenario says otherwise). Returns the log and the robot (its count of commands received
     during the run)."""
-    robot = WireRobot(transport, ros, spec.params, pacer, epoch, after, lockstep_s)
+    robot = WireRobot(transport, ros, spec.params, pacer, epoch_ns, after, lockstep_s)
     if wait_s > 0.0:
         robot.wait_for_node(wait_s)
     log = run_episode(robot, spec.person, spec.params, spec.duration, start=spec.start,

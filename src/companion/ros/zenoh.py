@@ -26,7 +26,7 @@ import zenoh.ext
 
 from companion.ros import rmw_zenoh as wire
 from companion.ros.messages import DEFAULT_DISTRO, dds_type_name, typestore
-from companion.ros.transport import DEFAULT, Qos
+from companion.ros.transport import DEFAULT, Endpoint, Qos
 
 log = logging.getLogger(__name__)
 
@@ -85,6 +85,8 @@ class ZenohTransport:
         self._next_id = 0
         self._declared: list[Any] = []      # publishers, subscribers, tokens: undeclared on close
         self.dropped = 0                    # samples received that did not decode
+        self._graph: dict[str, tuple] | None = None   # liveliness tokens seen (publishers)
+        self._graph_lock = threading.Lock()
         # rmw_zenoh numbers the node and its entities from one counter per context, node first
         # (src/detail/rmw_context_impl_s.cpp, get_next_entity_id).
         node_id = self._new_id()
@@ -161,6 +163,58 @@ class ZenohTransport:
             sub = self.session.declare_subscriber(key, on_sample)
         self._keep(sub)
         self._declare_token(entity)
+
+    def serve(self, service: str, srvtype: str, handler: Callable[[Any], Any]) -> None:
+        """Answer ``service`` as an rmw_zenoh service (src/detail/rmw_service_data.cpp): a
+        complete queryable on the service's key expression (its type is the service type,
+        ``pkg::srv::dds_::Name_``, with the service type's hash) and an ``SS`` token; each
+        query carries the request's CDR and the client's attachment (sequence number, time,
+        GID), and the reply carries the response with that sequence number and GID. A query
+        that does not decode, or a handler that raises, is logged and not answered."""
+        wire.check_topic(service)
+        node = self.node
+        entity = wire.Entity(self.domain_id, self.zid, node.node_id, self._new_id(),
+                             wire.SERVICE, node.enclave, node.namespace, node.node_name,
+                             service, dds_type_name(srvtype),
+                             wire.wire_service_hash(srvtype, self.distro), Qos(depth=10))
+        key = wire.topic_keyexpr(self.domain_id, service, srvtype, entity.type_hash)
+        ts = self.typestore
+
+        def on_query(query: zenoh.Query) -> None:
+            try:
+                seq, _, gid = wire.parse_attachment(query.attachment.to_bytes())
+                request = ts.deserialize_cdr(query.payload.to_bytes(), f"{srvtype}_Request")
+                response = bytes(ts.serialize_cdr(handler(request), f"{srvtype}_Response"))
+            except Exception as exc:  # a bad query must not kill the Zenoh thread
+                log.warning("zenoh: %s: a request was not answered (%s)", service, exc)
+                return
+            query.reply(key, response, attachment=wire.attachment(seq, time.time_ns(), gid))
+
+        self._keep(self.session.declare_queryable(key, on_query, complete=True))
+        self._declare_token(entity)
+
+    def publishers(self, topic: str) -> list[Endpoint]:
+        """Other nodes' publishers on ``topic``, as their liveliness tokens announce them
+        (type and QoS)."""
+        with self._graph_lock:             # the first call starts listening to the tokens
+            if self._graph is None:
+                with self._lock:
+                    self._graph = {}
+                self._keep(self.session.liveliness().declare_subscriber(
+                    f"{wire.ADMIN_SPACE}/{self.domain_id}/**", self._on_token, history=True))
+        with self._lock:
+            found = list(self._graph.values())
+        return [Endpoint(t, msgtype, qos) for zid, kind, t, msgtype, qos in found
+                if kind == wire.PUBLISHER and t == topic and zid != self.zid]
+
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        token = wire.parse_token(key)
+        with self._lock:
+            if sample.kind == zenoh.SampleKind.DELETE:
+                self._graph.pop(key, None)
+            elif token is not None:
+                self._graph[key] = token
 
     def close(self) -> None:
         """Undeclare every publisher, subscriber and token (ending the subscribers' callback

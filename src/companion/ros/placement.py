@@ -1,0 +1,151 @@
+"""Where an input measured in some frame at some stamp lies in the odometry frame.
+
+A detection or a scan in frame F at stamp t is placed, in this order (docs/ros2.md):
+
+1. F is ``ros.odom_frame``: as it is;
+2. the transform tree (/tf, /tf_static) links F to ``ros.base_frame`` at t: that transform
+   after the odometry pose at t (the node's robot pose comes from /odom);
+3. the tree links F to ``ros.odom_frame`` at t (a camera fixed in the world);
+4. F is ``ros.base_frame``: the odometry pose at t; F is ``ros.lidar_frame``: the odometry
+   pose after ``ros.lidar_mount`` (for robots without tf);
+5. else it cannot be placed (the tracker's reason ``detection_frame``).
+
+A transform the tree knows, but not yet at t (it arrives later than the input), makes the
+input wait (:data:`WAIT`), at most ``ros.tf_wait_s``. The odometry pose at t is interpolated
+between the samples around t (or moved on from the nearest with its velocity, at most
+0.5 s).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from companion.geometry import unicycle_step, wrap_pi
+from companion.ros.convert import OdometrySample, Stamped
+from companion.ros.settings import RosParams
+from companion.ros.tf import Lookup, Transform, TransformBuffer
+from companion.types import PersonDetection, Pose
+
+#: The input's transform is known, but not yet at its stamp: try again at the next period.
+WAIT = "wait"
+
+
+def pose_at(samples: deque[OdometrySample], t: float) -> Pose | None:
+    """The odometry pose at time ``t``: interpolated between the samples around it, or
+    moved on from the nearest end with its velocity (at most 0.5 s); None without samples."""
+    if not samples:
+        return None
+    if t <= samples[0].t or t >= samples[-1].t:
+        s = samples[0] if t <= samples[0].t else samples[-1]
+        x, y, th = unicycle_step(s.pose.x, s.pose.y, s.pose.theta, *s.velocity,
+                                 max(-0.5, min(t - s.t, 0.5)))
+        return Pose(x, y, wrap_pi(th))
+    lo, hi = 0, len(samples) - 1
+    while hi - lo > 1:              # the samples are in time order
+        mid = (lo + hi) // 2
+        lo, hi = (mid, hi) if samples[mid].t <= t else (lo, mid)
+    a, b = samples[lo], samples[hi]
+    w = (t - a.t) / (b.t - a.t) if b.t > a.t else 0.0
+    dth = wrap_pi(b.pose.theta - a.pose.theta)
+    return Pose(a.pose.x + w * (b.pose.x - a.pose.x), a.pose.y + w * (b.pose.y - a.pose.y),
+                wrap_pi(a.pose.theta + w * dth))
+
+
+def planar(pose: Pose) -> Transform:
+    """A planar pose as a 3D transform (rotation about z)."""
+    return Transform(Rotation.from_euler("z", pose.theta),
+                     np.array([pose.x, pose.y, 0.0]))
+
+
+def flat(transform: Transform) -> Pose:
+    """The planar part of a transform: its origin's x, y and its x axis' heading."""
+    return Pose(float(transform.translation[0]), float(transform.translation[1]),
+                transform.yaw)
+
+
+class Placer:
+    """Places inputs in ``ros.odom_frame`` (see the module docstring); ``tf`` None: without a
+    transform tree (steps 1, 4, 5)."""
+
+    def __init__(self, ros: RosParams, tf: TransformBuffer | None):
+        self.ros, self.tf = ros, tf
+
+    def frame(self, frame: str, t: float, samples: deque[OdometrySample]
+              ) -> Transform | str | None:
+        """The transform of ``frame`` into the odometry frame at ``t``; :data:`WAIT` while the
+        tree does not know it at ``t`` yet; None if it cannot be placed."""
+        r = self.ros
+        frame = frame.lstrip("/")
+        if frame == r.odom_frame:
+            return planar(Pose(0.0, 0.0, 0.0))
+        robot = pose_at(samples, t)
+        waiting = False
+        if self.tf is not None:
+            for target, before in ((r.base_frame, robot), (r.odom_frame, Pose(0.0, 0.0, 0.0))):
+                if before is None or (target == r.base_frame and frame == r.base_frame):
+                    continue
+                try:
+                    return planar(before).then(self.tf.lookup(target, frame, t))
+                except Lookup as exc:
+                    waiting |= exc.reason == "future"
+        if waiting:
+            return WAIT
+        if robot is None:
+            return None
+        if frame == r.base_frame:
+            return planar(robot)
+        if frame == r.lidar_frame:
+            return planar(robot).then(planar(Pose(*r.lidar_mount)))
+        return None
+
+    def odometry(self, sample: OdometrySample, frame: str, child: str
+                 ) -> OdometrySample | str:
+        """An odometry sample of ``child`` in ``frame`` as the pose of ``ros.base_frame`` in
+        ``ros.odom_frame``, through the tree where the frames differ (the twist is taken as
+        the base's); a line saying what is missing if it cannot be placed."""
+        r = self.ros
+        frame, child = frame.lstrip("/") or r.odom_frame, child.lstrip("/") or r.base_frame
+        if frame == r.odom_frame and child == r.base_frame:
+            return sample
+        if self.tf is None:
+            return (f"odometry of {child} in {frame}, and ros.use_tf is off; expected "
+                    f"{r.base_frame} in {r.odom_frame}")
+        try:
+            pose = planar(sample.pose)
+            if frame != r.odom_frame:
+                pose = self.tf.lookup(r.odom_frame, frame, sample.t).then(pose)
+            if child != r.base_frame:
+                pose = pose.then(self.tf.lookup(child, r.base_frame, sample.t))
+        except Lookup as exc:
+            return f"odometry of {child} in {frame}: {exc}"
+        return OdometrySample(sample.t, flat(pose), sample.velocity)
+
+    def detection(self, s: Stamped, samples: deque[OdometrySample], world: str
+                  ) -> PersonDetection | str:
+        """``s`` as the tracker takes it, in its ``world`` frame: position, covariance and
+        heading rotated into the odometry frame; a detection that cannot be placed keeps its
+        frame's name (the tracker rejects it as ``detection_frame``); :data:`WAIT`."""
+        where = self.frame(s.frame, s.t, samples)
+        extra = (s.covariance, s.heading, s.heading_std, s.speed, s.turn_rate, s.velocity_std,
+                 s.track_id)
+        if where == WAIT:
+            return WAIT
+        if where is None:
+            return PersonDetection(s.t, s.x, s.y, s.frame or "(no frame)", *extra)
+        m = where.rotation.as_matrix()
+        x, y, _ = where.apply(np.array([s.x, s.y, s.z]))
+        cov = s.covariance
+        if cov is not None:        # R C R^T of the xy block (no uncertainty along z)
+            c3 = np.zeros((3, 3))
+            c3[:2, :2] = np.reshape(cov, (2, 2))
+            cov = tuple((m @ c3 @ m.T)[:2, :2].ravel().tolist())
+        heading = s.heading
+        if heading is not None:
+            d = m @ np.array([math.cos(heading), math.sin(heading), 0.0])
+            heading = math.atan2(d[1], d[0])
+        return PersonDetection(s.t, float(x), float(y), world, cov, heading, s.heading_std,
+                               s.speed, s.turn_rate, s.velocity_std, s.track_id)
