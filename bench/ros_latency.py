@@ -113,7 +113,7 @@ def compute_run(periods: int, scan: bool) -> list[float]:
     config = config_from_mapping({"ros": {"person_type": "pose_array", "topics": topics}})
     bus = MemoryBus()
     node_side = MemoryTransport(bus, typestore())
-    node = CompanionNode(config, node_side)
+    node = CompanionNode(config, node_side, time_base=convert.ABSOLUTE)   # stamps from 0
     robot_side = MemoryTransport(bus, node_side.typestore)
     r = config.ros
     odom = robot_side.publisher(r.topics.odom, "nav_msgs/msg/Odometry")

@@ -171,6 +171,7 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
             # the node can tick on /clock while waiting); else the system clock at t = 0
             epoch = SIM_EPOCH_NS + int(round(sc.params.dt * 1e9)) if ros.use_sim_time else None
             domain, source = domain_of(ros)
+            source = "--domain-id" if args.domain_id is not None else source
             print(f"companion sim-robot: {sc.name}, {sc.duration:g} s at {rate:g}x real time "
                   f"over {ros.transport} (domain {domain} from {source}); waiting for a node "
                   f"on {ros.topics.cmd_vel}", flush=True)

@@ -89,7 +89,6 @@ class DdsTransport:
         self._closed = False
         self._services = 0
         self._fast_dds_named = False
-        self._discovered: BuiltinDataReader | None = None
         self._known: dict[Any, Any] = {}
         try:
             try:
@@ -102,6 +101,9 @@ class DdsTransport:
             self._discovery = DataWriter(
                 self.participant, self._topic(DISCOVERY_TOPIC, DISCOVERY_TYPE),
                 qos=dds_qos(DISCOVERY_QOS, self._user_data(DISCOVERY_TYPE)))
+            # other participants' writers (publishers()), read as they are discovered
+            self._discovered = BuiltinDataReader(self.participant,
+                                                 BuiltinTopicDcpsPublication)
             self._announce()
         except BaseException:
             if hasattr(self, "participant"):
@@ -205,9 +207,6 @@ class DdsTransport:
         with self._lock:
             if self._closed:
                 return []
-            if self._discovered is None:
-                self._discovered = BuiltinDataReader(self.participant,
-                                                     BuiltinTopicDcpsPublication)
             while found := self._discovered.take(N=256):
                 for s in found:
                     alive = s.sample_info.valid_data and s.topic_name is not None
@@ -235,8 +234,7 @@ class DdsTransport:
             try:
                 self._announce(node=False)
             finally:
-                discovered = [self._discovered] if self._discovered is not None else []
-                for entity in [*self._readers, *self._writers, self._discovery, *discovered,
+                for entity in [*self._readers, *self._writers, self._discovery, self._discovered,
                                *self._topics.values(), self.participant]:
                     entity.__del__()
                 DOMAINS.release(self.domain_id)

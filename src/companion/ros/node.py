@@ -51,8 +51,9 @@ from companion.types import (
 _NOWHERE = Pose(math.nan, math.nan, math.nan)
 #: How often (s of node time) the node looks at the publishers on its input topics.
 GRAPH_PERIOD_S = 1.0
-#: A change of status is logged at most this often (s); a stop is logged at once.
-STATUS_LOG_S = 1.0
+#: A change between ok and degraded is logged at most this often (s); a stop, and the end of
+#: one, at once.
+STATUS_LOG_S = 5.0
 
 
 class View(NamedTuple):
@@ -127,9 +128,10 @@ class CompanionNode:
         if r.use_sim_time:
             tr.subscribe(t.clock, "rosgraph_msgs/msg/Clock", self.on_clock,
                          Qos(reliable=False, depth=1))
-        if self.tf is not None:
+        if self.tf is not None and t.tf:
             tr.subscribe(t.tf, "tf2_msgs/msg/TFMessage", lambda m: self.on_tf(m, False),
                          Qos(reliable=False, depth=100))
+        if self.tf is not None and t.tf_static:
             tr.subscribe(t.tf_static, "tf2_msgs/msg/TFMessage", lambda m: self.on_tf(m, True),
                          Qos(reliable=True, transient_local=True, depth=100))
 
@@ -387,7 +389,8 @@ class CompanionNode:
         """The log of what changed: status changes, and each new problem on the graph or
         with placing inputs (checked every :data:`GRAPH_PERIOD_S`)."""
         status, reason, shown = self._shown
-        if cmd.status != status and (cmd.status == "stopped" or now - shown >= STATUS_LOG_S):
+        stop = "stopped" in (cmd.status, status)
+        if cmd.status != status and (stop or now - shown >= STATUS_LOG_S):
             level = logging.WARNING if cmd.status == "stopped" else logging.INFO
             self.log.log(level, "status %s%s", cmd.status, f": {cmd.reason}" * bool(cmd.reason))
             self._shown = (cmd.status, cmd.reason, now)

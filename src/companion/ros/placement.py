@@ -2,12 +2,13 @@
 
 A detection or a scan in frame F at stamp t is placed, in this order (docs/ros2.md):
 
-1. F is ``ros.odom_frame``: as it is;
+1. F is ``ros.odom_frame``: as it is; F is ``ros.base_frame``: the odometry pose at t (the
+   node's robot pose comes from /odom, even where /tf carries it too);
 2. the transform tree (/tf, /tf_static) links F to ``ros.base_frame`` at t: that transform
-   after the odometry pose at t (the node's robot pose comes from /odom);
+   after the odometry pose at t;
 3. the tree links F to ``ros.odom_frame`` at t (a camera fixed in the world);
-4. F is ``ros.base_frame``: the odometry pose at t; F is ``ros.lidar_frame``: the odometry
-   pose after ``ros.lidar_mount`` (for robots without tf);
+4. F is ``ros.lidar_frame``: the odometry pose after ``ros.lidar_mount`` (for robots
+   without tf);
 5. else it cannot be placed (the tracker's reason ``detection_frame``).
 
 A transform the tree knows, but not yet at t (it arrives later than the input), makes the
@@ -83,10 +84,12 @@ class Placer:
         if frame == r.odom_frame:
             return planar(Pose(0.0, 0.0, 0.0))
         robot = pose_at(samples, t)
+        if frame == r.base_frame:           # the odometry's own frame: its pose, not /tf's
+            return None if robot is None else planar(robot)
         waiting = False
         if self.tf is not None:
             for target, before in ((r.base_frame, robot), (r.odom_frame, Pose(0.0, 0.0, 0.0))):
-                if before is None or (target == r.base_frame and frame == r.base_frame):
+                if before is None:
                     continue
                 try:
                     return planar(before).then(self.tf.lookup(target, frame, t))
@@ -96,8 +99,6 @@ class Placer:
             return WAIT
         if robot is None:
             return None
-        if frame == r.base_frame:
-            return planar(robot)
         if frame == r.lidar_frame:
             return planar(robot).then(planar(Pose(*r.lidar_mount)))
         return None

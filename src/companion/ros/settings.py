@@ -85,9 +85,9 @@ class Topics(Validated):
     markers: str = param("/companion/markers", "", "visualization_msgs/MarkerArray out "
                          "('' : none)", _topic)
     clock: str = param("/clock", "", "rosgraph_msgs/Clock in, with use_sim_time", _topic)
-    tf: str = param("/tf", "", "tf2_msgs/TFMessage in (with use_tf)", _topic)
+    tf: str = param("/tf", "", "tf2_msgs/TFMessage in (with use_tf; '' : none)", _topic)
     tf_static: str = param("/tf_static", "", "tf2_msgs/TFMessage in, transient local (with "
-                           "use_tf)", _topic)
+                           "use_tf; '' : none)", _topic)
 
 
 @dataclasses.dataclass(frozen=True)

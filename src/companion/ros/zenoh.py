@@ -85,14 +85,17 @@ class ZenohTransport:
         self._next_id = 0
         self._declared: list[Any] = []      # publishers, subscribers, tokens: undeclared on close
         self.dropped = 0                    # samples received that did not decode
-        self._graph: dict[str, tuple] | None = None   # liveliness tokens seen (publishers)
-        self._graph_lock = threading.Lock()
+        self._graph: dict[str, tuple] = {}          # other nodes' tokens seen, by key
         # rmw_zenoh numbers the node and its entities from one counter per context, node first
         # (src/detail/rmw_context_impl_s.cpp, get_next_entity_id).
         node_id = self._new_id()
         self.node = wire.Entity(domain_id, self.zid, node_id, node_id, wire.NODE, enclave,
                                 namespace, node_name)
         self._declare_token(self.node)
+        # the graph (publishers()): other nodes' tokens, those already there first (this waits
+        # for the router's answer, so it is done here, not when a node's period asks)
+        self._keep(self.session.liveliness().declare_subscriber(
+            f"{wire.ADMIN_SPACE}/{domain_id}/**", self._on_token, history=True))
 
     def publisher(self, topic: str, msgtype: str, qos: Qos = DEFAULT) -> Callable[[Any], None]:
         """A function publishing ``msgtype`` messages on ``topic`` as an rmw_zenoh publisher
@@ -196,12 +199,6 @@ class ZenohTransport:
     def publishers(self, topic: str) -> list[Endpoint]:
         """Other nodes' publishers on ``topic``, as their liveliness tokens announce them
         (type and QoS)."""
-        with self._graph_lock:             # the first call starts listening to the tokens
-            if self._graph is None:
-                with self._lock:
-                    self._graph = {}
-                self._keep(self.session.liveliness().declare_subscriber(
-                    f"{wire.ADMIN_SPACE}/{self.domain_id}/**", self._on_token, history=True))
         with self._lock:
             found = list(self._graph.values())
         return [Endpoint(t, msgtype, qos) for zid, kind, t, msgtype, qos in found
