@@ -17,16 +17,13 @@ import argparse
 import json
 import os
 import statistics
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-CLIENT = ROOT / "tests" / "ros" / "rclpy_client.py"
 sys.path.insert(0, str(ROOT / "tests" / "ros"))
-from test_rclpy_node import Node  # noqa: E402  (the node as a subprocess, lines timed)
+from test_rclpy_node import first_command  # noqa: E402  (one timed start, shared with the test)
 
 from companion.ros.dds_base import LOOPBACK  # noqa: E402
 
@@ -45,28 +42,8 @@ def envs(home: Path, domain: int) -> tuple[dict, dict]:
 
 def one_run(home: Path, domain: int, order: str, transport: str) -> float:
     node_env, robot_env = envs(home, domain)
-    plan = home / "plan.json"
-    plan.write_text(json.dumps({"publish": [], "listen": [
-        ["/cmd_vel", "geometry_msgs/msg/Twist", True, False]], "timeout": 30.0}))
-    robot = node = None
-    try:
-        if order == "robot first":
-            robot = subprocess.Popen([sys.executable, str(CLIENT), str(plan)], env=robot_env,
-                                     stdout=subprocess.PIPE, text=True)
-            time.sleep(2.0)
-        node = Node(home, node_env, "--domain-id", str(domain), "--transport", transport)
-        up, _ = node.wait_for("companion node:")
-        if robot is None:
-            robot = subprocess.Popen([sys.executable, str(CLIENT), str(plan)], env=robot_env,
-                                     stdout=subprocess.PIPE, text=True)
-        out, _ = robot.communicate(timeout=60)
-        report = json.loads(out.strip().splitlines()[-1])
-    finally:
-        if node is not None:
-            node.stop()
-        if robot is not None and robot.poll() is None:
-            robot.kill()
-    return report["first"]["/cmd_vel"] - max(up, report["up"])
+    return first_command(home, node_env, robot_env, order,
+                         "--domain-id", str(domain), "--transport", transport)
 
 
 def main() -> int:

@@ -111,6 +111,33 @@ def poses(x=0.0, y=1.0):
                                                           "pose_array", 0.0, "odom")), 10.0, True]
 
 
+def first_command(home: Path, env: dict, robot_env: dict, order: str, *node_args: str) -> float:
+    """Seconds from both being up (the later of the node's start line and the rclpy robot's
+    node existing) to the robot's first /cmd_vel; ``order`` is "node first" or "robot first"
+    (the robot then 2 s ahead). Shared with bench/ros_first_command.py."""
+    plan = home / "first_command.json"
+    plan.write_text(json.dumps({"publish": [], "listen": [CMD], "timeout": 40.0}))
+    robot = node = None
+    try:
+        if order == "robot first":
+            robot = subprocess.Popen([sys.executable, str(CLIENT), str(plan)], env=robot_env,
+                                     stdout=subprocess.PIPE, text=True)
+            time.sleep(2.0)
+        node = Node(home, env, *node_args)
+        node_up, _ = node.wait_for("companion node:")
+        if robot is None:
+            robot = subprocess.Popen([sys.executable, str(CLIENT), str(plan)], env=robot_env,
+                                     stdout=subprocess.PIPE, text=True)
+        out, _ = robot.communicate(timeout=70)
+        report = json.loads(out.strip().splitlines()[-1])
+    finally:
+        if node is not None:
+            node.stop()
+        if robot is not None and robot.poll() is None:
+            robot.kill()
+    return report["first"]["/cmd_vel"] - max(node_up, report["up"])
+
+
 def test_domain_from_the_environment_posearray_best_effort_odom_and_rosout(tmp_path, rclpy_env,
                                                                           ros_domain):
     """ROS_DOMAIN_ID alone puts the node on the robot's domain (the start line says so); a
@@ -237,26 +264,6 @@ def test_a_robot_hears_the_first_command_soon_after_both_are_up(tmp_path, rclpy_
     """The time from both being up (the later of the node's start line and the robot's node
     being created) to the robot's first /cmd_vel; `python bench/ros_first_command.py` gives
     its distribution over 10 starts of each order (docs/ros2.md). A bound here: 3 s."""
-    env = node_env(tmp_path, ros_domain)
-    plan = tmp_path / "robot.json"
-    plan.write_text(json.dumps({"publish": [], "listen": [CMD], "timeout": 40.0}))
-    robot = node = None
-    try:
-        if order == "robot first":
-            robot = subprocess.Popen([sys.executable, str(CLIENT), str(plan)], env=rclpy_env,
-                                     stdout=subprocess.PIPE, text=True)
-            time.sleep(2.0)
-        node = Node(tmp_path, env, "--domain-id", str(ros_domain))
-        node_up, _ = node.wait_for("companion node:")
-        if robot is None:
-            robot = subprocess.Popen([sys.executable, str(CLIENT), str(plan)], env=rclpy_env,
-                                     stdout=subprocess.PIPE, text=True)
-        out, _ = robot.communicate(timeout=70)
-        report = json.loads(out.strip().splitlines()[-1])
-    finally:
-        if node is not None:
-            node.stop()
-        if robot is not None and robot.poll() is None:
-            robot.kill()
-    first = report["first"]["/cmd_vel"]
-    assert first - max(node_up, report["up"]) < 3.0
+    delay = first_command(tmp_path, node_env(tmp_path, ros_domain), rclpy_env, order,
+                          "--domain-id", str(ros_domain))
+    assert delay < 3.0
