@@ -46,7 +46,7 @@ from companion.ros.settings import RosParams, config_from_mapping
 from companion.ros.transport import MemoryBus, MemoryTransport
 from companion.sim.episode import start_in_slot
 from companion.sim.lidar import cast
-from companion.types import Circle, PersonState, Pose
+from companion.types import Circle, PersonDetection, PersonState, Pose
 
 P = Params()
 DT = P.dt
@@ -129,7 +129,7 @@ def compute_run(periods: int, scan: bool) -> list[float]:
         if scan and k % 2 == 0:
             seen = cast(robot, obstacles, (), person_at(t), P.lidar, rng)
             lidar(convert.scan_msg(t, seen, r.lidar_frame, 2 * DT))
-        people(convert.person_msg([convert.Stamped(t, *person_at(t), r.odom_frame)],
+        people(convert.person_msg([PersonDetection(t, *person_at(t), r.odom_frame)],
                                   "pose_array", t, r.odom_frame))
         start = time.perf_counter()
         out = node.tick(t)

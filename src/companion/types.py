@@ -44,7 +44,9 @@ class PersonDetection:
     m^2), the ``heading`` (rad, world frame) with ``heading_std``, the ``speed`` (m/s) and
     ``turn_rate`` (rad/s) with ``velocity_std`` (an upstream tracker, a tag with an IMU), and
     the detector's own ``track_id``. A missing std means the tracker's default; a std of 0
-    means exact.
+    means exact. ``z`` (m) is the third coordinate in ``frame`` for a detector that measures
+    it (a camera's optical frame measures depth along z): placing the detection through tf
+    uses it; the tracker uses ``x``, ``y`` only.
     """
 
     t: float
@@ -58,6 +60,7 @@ class PersonDetection:
     turn_rate: float | None = None
     velocity_std: tuple[float, float] | None = None
     track_id: int | None = None
+    z: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ from companion.ros.settings import config_from_mapping
 from companion.ros.sim_robot import SIM_EPOCH_NS
 from companion.ros.transport import MemoryBus, MemoryTransport
 from companion.sim.scenario import load_scenario
-from companion.types import Pose
+from companion.types import PersonDetection, Pose
 
 DURATION = 4.0
 SIM = convert.TimeBase(SIM_EPOCH_NS)
@@ -141,10 +141,10 @@ def test_a_node_records_inputs_before_the_tick_that_used_them(tmp_path):
         clock[0] = 100.0 + 0.05 * k
         odom(convert.odometry_msg(clock[0], Pose(0.05 * k, 0, 0), (1.0, 0.0), "odom",
                                   "base_link"))
-        person(convert.person_msg([convert.Stamped(clock[0], 0.05 * k, 1.0, "odom")],
+        person(convert.person_msg([PersonDetection(clock[0], 0.05 * k, 1.0, "odom")],
                                   "point", clock[0], "odom"))
         node.tick(clock[0])
-        person(convert.person_msg([convert.Stamped(clock[0], 0.05 * k, 1.0, "odom")],
+        person(convert.person_msg([PersonDetection(clock[0], 0.05 * k, 1.0, "odom")],
                                   "point", clock[0], "odom"))   # after the tick
     bag.close()
     _, msgs = read(tmp_path / "node")

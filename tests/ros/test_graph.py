@@ -12,7 +12,7 @@ from companion.ros.messages import message, typestore
 from companion.ros.node import CompanionNode
 from companion.ros.settings import RosParams, config_from_mapping
 from companion.ros.transport import DEFAULT, SENSOR_DATA, Endpoint, MemoryBus, MemoryTransport
-from companion.types import Pose
+from companion.types import PersonDetection, Pose
 
 POSES = "geometry_msgs/msg/PoseArray"
 
@@ -73,7 +73,7 @@ def test_a_detector_of_another_type_is_named_on_status_and_rosout():
     for k in range(30):
         t = 50.0 + 0.05 * k
         odom(convert.odometry_msg(t, Pose(0, 0, 0), (0, 0), "odom", "base_link"))
-        poses(convert.person_msg([convert.Stamped(t, 1.0, 1.0, "odom")], "pose_array", t,
+        poses(convert.person_msg([PersonDetection(t, 1.0, 1.0, "odom")], "pose_array", t,
                                  "odom"))
         cmd = node.tick(t)
     assert cmd.estimate is None
@@ -92,7 +92,7 @@ def test_auto_takes_any_person_type():
     for k in range(30):
         t = 50.0 + 0.05 * k
         odom(convert.odometry_msg(t, Pose(0, 0, 0), (0, 0), "odom", "base_link"))
-        poses(convert.person_msg([convert.Stamped(t, 1.0 + 0.05 * k, 1.0, "odom")],
+        poses(convert.person_msg([PersonDetection(t, 1.0 + 0.05 * k, 1.0, "odom")],
                                  "pose_array", t, "odom"))
         cmd = node.tick(t)
     assert cmd.estimate is not None and node.warnings == []

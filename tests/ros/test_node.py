@@ -21,7 +21,7 @@ from companion.ros.spin import spin
 from companion.ros.transport import MemoryBus, MemoryTransport
 from companion.sim.runner import run_one
 from companion.sim.scenario import load_scenario
-from companion.types import Pose, Scan
+from companion.types import PersonDetection, Pose, Scan
 
 
 def graph():
@@ -68,7 +68,7 @@ def odom(t: float, x: float, y: float, theta: float, v: float = 0.0, w: float = 
 
 
 def person(t: float, x: float, y: float, frame: str = "odom"):
-    return convert.person_msg([convert.Stamped(t, x, y, frame)], "point", t, frame)
+    return convert.person_msg([PersonDetection(t, x, y, frame)], "point", t, frame)
 
 
 def node_on_bus(**ros):
@@ -146,11 +146,11 @@ def test_robot_frame_detections_are_placed_with_the_odometry_pose_at_their_stamp
     for k in range(11):
         t = 10.0 + 0.1 * k
         send_odom(odom(t, 0.0, 0.1 * k, math.pi / 2, 1.0))
-    d = node.placer.detection(convert.Stamped(10.55, 1.0, 0.0, "base_link"), node._odom,
+    d = node.placer.detection(PersonDetection(10.55, 1.0, 0.0, "base_link"), node._odom,
                               "world")
     assert (d.x, d.y, d.frame) == (pytest.approx(0.0, abs=1e-9), pytest.approx(1.55),
                                    "world")
-    unknown = node.placer.detection(convert.Stamped(10.55, 1.0, 0.0, "camera"), node._odom,
+    unknown = node.placer.detection(PersonDetection(10.55, 1.0, 0.0, "camera"), node._odom,
                                     "world")
     assert unknown.frame == "camera"          # the tracker rejects it (detection_frame)
 
@@ -180,15 +180,15 @@ def test_spin_ends_with_a_zero_velocity():
 
 
 def test_person_odometry_round_trip_keeps_what_was_measured():
-    full = convert.Stamped(3.5, 1.0, 2.0, "odom", (0.01, 0.002, 0.002, 0.04), 0.3, 0.1, 1.2,
+    full = PersonDetection(3.5, 1.0, 2.0, "odom", (0.01, 0.002, 0.002, 0.04), 0.3, 0.1, 1.2,
                            0.2, (0.05, 0.06))
-    part = convert.Stamped(3.5, 1.0, 2.0, "odom")
+    part = PersonDetection(3.5, 1.0, 2.0, "odom")
     ts = typestore()
     for p in (full, part):
         msg = convert.person_msg([p], "odometry", p.t, p.frame)
         back = convert.people_from(ts.deserialize_cdr(ts.serialize_cdr(
             msg, "nav_msgs/msg/Odometry"), "nav_msgs/msg/Odometry"), "odometry")[0]
-        for got, want in zip(back, p):
+        for got, want in zip(dataclasses.astuple(back), dataclasses.astuple(p), strict=True):
             assert got == pytest.approx(want) if want is not None else got is None
 
 

@@ -24,7 +24,7 @@ from companion.ros import convert
 from companion.ros.dds import DdsTransport, loopback_config
 from companion.ros.messages import make, typestore
 from companion.ros.transport import Qos
-from companion.types import Pose
+from companion.types import PersonDetection, Pose
 
 pytestmark = needs_rclpy
 CLIENT = Path(__file__).with_name("rclpy_client.py")
@@ -107,7 +107,7 @@ EVENTS = ["/parameter_events", "rcl_interfaces/msg/ParameterEvent", True, False]
 def poses(x=0.0, y=1.0):
     """A PoseArray with one person at (x, y) in the odometry frame."""
     return ["/person", "geometry_msgs/msg/PoseArray", True, cdr(
-        "geometry_msgs/msg/PoseArray", convert.person_msg([convert.Stamped(0.0, x, y, "odom")],
+        "geometry_msgs/msg/PoseArray", convert.person_msg([PersonDetection(0.0, x, y, "odom")],
                                                           "pose_array", 0.0, "odom")), 10.0, True]
 
 

@@ -4,6 +4,7 @@ reason), a camera's optical frame (tilted, depth along z), odometry of another c
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -16,7 +17,7 @@ from companion.ros.node import CompanionNode
 from companion.ros.settings import config_from_mapping
 from companion.ros.tf import Lookup, Transform, TransformBuffer
 from companion.ros.transport import MemoryBus, MemoryTransport
-from companion.types import Pose
+from companion.types import PersonDetection, Pose
 
 
 def tf(x=0.0, y=0.0, z=0.0, yaw=0.0, rotation=None):
@@ -101,11 +102,11 @@ def test_a_detection_in_a_camera_optical_frame_is_placed_through_the_tree():
     for k in range(3):
         t = 20.0 + 0.05 * k
         odom(convert.odometry_msg(t, Pose(2.0, 1.0, math.pi / 2), (0, 0), "odom", "base_link"))
-    s = convert.Stamped(20.05, 0.5, 0.0, "camera_optical", z=2.0)
+    s = PersonDetection(20.05, 0.5, 0.0, "camera_optical", z=2.0)
     d = node.placer.detection(s, node._odom, "world")
     assert (d.frame, d.x, d.y) == ("world", pytest.approx(2.5), pytest.approx(3.3))
-    cov = node.placer.detection(s._replace(covariance=(0.04, 0.0, 0.0, 0.01)), node._odom,
-                                "world").covariance
+    s = dataclasses.replace(s, covariance=(0.04, 0.0, 0.0, 0.01))
+    cov = node.placer.detection(s, node._odom, "world").covariance
     # the optical x (0.04) is the base's -y, i.e. the world's x here; optical y points down
     assert cov == pytest.approx((0.04, 0.0, 0.0, 0.0), abs=1e-12)
 
@@ -119,7 +120,7 @@ def test_a_transform_that_comes_late_is_waited_for_within_the_bound():
     for k in range(40):
         t = 30.0 + 0.05 * k
         odom(convert.odometry_msg(t, Pose(0.0, 0.0, 0.0), (0, 0), "odom", "base_link"))
-        point(convert.person_msg([convert.Stamped(t, 1.0, 0.0, "fixed_cam")], "point", t,
+        point(convert.person_msg([PersonDetection(t, 1.0, 0.0, "fixed_cam")], "point", t,
                                  "fixed_cam"))
         if k >= 2:                  # the camera's pose comes 0.1 s behind the detections
             tf_pub(make("tf2_msgs/msg/TFMessage", transforms=[transform_msg(
@@ -133,7 +134,7 @@ def test_a_transform_that_comes_late_is_waited_for_within_the_bound():
     for k in range(30):
         t = 30.0 + 0.05 * k
         odom2(convert.odometry_msg(t, Pose(0.0, 0.0, 0.0), (0, 0), "odom", "base_link"))
-        point2(convert.person_msg([convert.Stamped(t, 1.0, 0.0, "nowhere")], "point", t,
+        point2(convert.person_msg([PersonDetection(t, 1.0, 0.0, "nowhere")], "point", t,
                                   "nowhere"))
         cmd = node2.tick(t)
     assert "detection_frame" in cmd.reason

@@ -17,31 +17,6 @@ from companion.ros.messages import make
 from companion.types import Circle, Command, PersonDetection, PersonEstimate, Pose, Scan
 
 
-class Stamped(NamedTuple):
-    """A person as the wire carries it: the fields of :class:`PersonDetection` (``frame`` is
-    the ROS frame of the header, which the node maps to the tracker's frames) and the height
-    ``z`` (m; a camera's optical frame measures depth along z)."""
-
-    t: float
-    x: float
-    y: float
-    frame: str = "world"
-    covariance: tuple[float, float, float, float] | None = None
-    heading: float | None = None
-    heading_std: float | None = None
-    speed: float | None = None
-    turn_rate: float | None = None
-    velocity_std: tuple[float, float] | None = None
-    track_id: int | None = None
-    z: float = 0.0
-
-    @classmethod
-    def of(cls, d: PersonDetection, t: float, frame: str) -> Stamped:
-        """A detection of the simulator as the wire carries it, at ``t`` in ``frame``."""
-        return cls(t, d.x, d.y, frame, d.covariance, d.heading, d.heading_std, d.speed,
-                   d.turn_rate, d.velocity_std, d.track_id)
-
-
 class TimeBase(NamedTuple):
     """Stamps on the wire (``builtin_interfaces/Time``, whole nanoseconds) and companion's
     seconds since ``origin_ns``. Seconds near zero keep nanosecond precision, where a float
@@ -165,9 +140,10 @@ def person_kind(msgtype: str) -> str:
     return next(kind for kind, name in PERSON_TYPES.items() if name == msgtype)
 
 
-def people_from(msg: Any, kind: str, tb: TimeBase = ABSOLUTE) -> list[Stamped]:
+def people_from(msg: Any, kind: str, tb: TimeBase = ABSOLUTE) -> list[PersonDetection]:
     """Every person in a PointStamped, PoseStamped, PoseArray or Odometry (``kind`` as in
-    :data:`PERSON_TYPES`), with the message's stamp and frame. An Odometry (an upstream
+    :data:`PERSON_TYPES`), with the message's stamp and its header's frame (a ROS frame, which
+    the node places in the tracker's frame: ros/placement.py) and ``z``. An Odometry (an upstream
     tracker, a tag with an IMU) also gives the covariance, heading, speed and turn rate
     (diagonal variances; 0 means exact; as in sensor_msgs/Imu, a first variance of -1 means
     "not measured": c[0] for the position, c[35] for the heading, the twist's c[0] for speed
@@ -180,14 +156,15 @@ def people_from(msg: Any, kind: str, tb: TimeBase = ABSOLUTE) -> list[Stamped]:
         moving = (tw.linear.x, tw.angular.z, (_std(tc[0]), _std(tc[35]))) if tc[0] >= 0.0 \
             else (None, None, None)
         cov = (float(c[0]), float(c[1]), float(c[6]), float(c[7])) if c[0] >= 0.0 else None
-        return [Stamped(t, p.position.x, p.position.y, frame, cov, *heading, *moving,
-                        z=p.position.z)]
+        return [PersonDetection(t, p.position.x, p.position.y, frame, cov, *heading, *moving,
+                                z=p.position.z)]
     if kind == "point":
-        return [Stamped(t, msg.point.x, msg.point.y, frame, z=msg.point.z)]
+        return [PersonDetection(t, msg.point.x, msg.point.y, frame, z=msg.point.z)]
     if kind == "pose":
         p = msg.pose.position
-        return [Stamped(t, p.x, p.y, frame, z=p.z)]
-    return [Stamped(t, p.position.x, p.position.y, frame, z=p.position.z) for p in msg.poses]
+        return [PersonDetection(t, p.x, p.y, frame, z=p.z)]
+    return [PersonDetection(t, q.position.x, q.position.y, frame, z=q.position.z)
+            for q in msg.poses]
 
 
 def twist_velocity(msg: Any) -> tuple[float, float]:
@@ -241,7 +218,7 @@ def scan_msg(t: float, scan: Scan, frame: str, period: float, tb: TimeBase = ABS
                 ranges=np.asarray(scan.ranges, dtype=np.float32))
 
 
-def person_msg(people: Sequence[Stamped], kind: str, t: float, frame: str,
+def person_msg(people: Sequence[PersonDetection], kind: str, t: float, frame: str,
                tb: TimeBase = ABSOLUTE) -> Any:
     """The people as a PointStamped, PoseStamped or Odometry (the first) or a PoseArray
     (all)."""
@@ -258,7 +235,7 @@ def person_msg(people: Sequence[Stamped], kind: str, t: float, frame: str,
                 pose=pose_msg(p.x, p.y, 0.0, getattr(p, "z", 0.0)))
 
 
-def _person_odometry(p: Stamped, tb: TimeBase) -> Any:
+def _person_odometry(p: PersonDetection, tb: TimeBase) -> Any:
     """nav_msgs/Odometry of one person; what was not measured has a first variance of -1
     (:func:`people_from`)."""
     pose = make("geometry_msgs/msg/PoseWithCovariance", pose=pose_msg(p.x, p.y, p.heading or 0.0))

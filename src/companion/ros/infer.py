@@ -22,6 +22,7 @@ from companion.params import SIDES
 from companion.ros import convert
 from companion.ros.placement import Placer, pose_at
 from companion.ros.settings import NodeConfig
+from companion.types import PersonDetection
 
 #: The person must walk at least this fast (m/s) ...
 MIN_SPEED = 0.3
@@ -71,7 +72,7 @@ def infer_side(reader: Any, config: NodeConfig) -> tuple[str, float]:
     person = [c for c in reader.connections(r.topics.person)
               if c.msgtype in convert.PERSON_TYPES.values()]
     odometry: list[convert.OdometrySample] = []
-    stamped: list[convert.Stamped] = []
+    stamped: list[PersonDetection] = []
     if odom is not None and odom.msgtype == "nav_msgs/msg/Odometry" and person:
         for c, _, msg in reader.records([odom, *person]):
             if c.topic == r.topics.odom:

@@ -32,7 +32,7 @@ from companion.geometry import unicycle_step, wrap_pi
 from companion.model import relative_state
 from companion.perception import extract_obstacles
 from companion.ros import convert, graph
-from companion.ros.convert import OdometrySample, Stamped, TimeBase, person_types
+from companion.ros.convert import OdometrySample, TimeBase, person_types
 from companion.ros.parameters import ParameterServer
 from companion.ros.placement import WAIT, Placer, flat
 from companion.ros.rosout import RosoutHandler, logger_name
@@ -95,7 +95,7 @@ class CompanionNode:
         self._scan_t = -math.inf                             # stamp of the last scan used
         self._obstacles: tuple[Circle, ...] = ()
         self._scan_seen: Any = None
-        self._people: list[tuple[Stamped, float]] = []       # (detection, arrival)
+        self._people: list[tuple[PersonDetection, float]] = []       # (detection, arrival)
         self._sim_time: float | None = None
         self._seen: tuple[float, float] | None = None
         self.last: Command | None = None
@@ -319,7 +319,7 @@ class CompanionNode:
             self._scans = [s for s in self._scans if s[0] <= ahead]
         return reasons
 
-    def _place_people(self, people: list[tuple[Stamped, float]],
+    def _place_people(self, people: list[tuple[PersonDetection, float]],
                       samples: deque[OdometrySample], now: float) -> list:
         """The detections placed in the odometry frame; those waiting for their transform
         go back for the next period, at most ``ros.tf_wait_s`` after they arrived."""

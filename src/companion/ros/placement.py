@@ -21,12 +21,13 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from dataclasses import replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from companion.geometry import unicycle_step, wrap_pi
-from companion.ros.convert import OdometrySample, Stamped
+from companion.ros.convert import OdometrySample
 from companion.ros.settings import RosParams
 from companion.ros.tf import Lookup, Transform, TransformBuffer
 from companion.types import PersonDetection, Pose
@@ -125,18 +126,16 @@ class Placer:
             return f"odometry of {child} in {frame}: {exc}"
         return OdometrySample(sample.t, flat(pose), sample.velocity)
 
-    def detection(self, s: Stamped, samples: deque[OdometrySample], world: str
+    def detection(self, s: PersonDetection, samples: deque[OdometrySample], world: str
                   ) -> PersonDetection | str:
         """``s`` as the tracker takes it, in its ``world`` frame: position, covariance and
         heading rotated into the odometry frame; a detection that cannot be placed keeps its
         frame's name (the tracker rejects it as ``detection_frame``); :data:`WAIT`."""
         where = self.frame(s.frame, s.t, samples)
-        extra = (s.covariance, s.heading, s.heading_std, s.speed, s.turn_rate, s.velocity_std,
-                 s.track_id)
         if where == WAIT:
             return WAIT
         if where is None:
-            return PersonDetection(s.t, s.x, s.y, s.frame or "(no frame)", *extra)
+            return replace(s, frame=s.frame or "(no frame)")
         m = where.rotation.as_matrix()
         x, y, _ = where.apply(np.array([s.x, s.y, s.z]))
         cov = s.covariance
@@ -148,5 +147,5 @@ class Placer:
         if heading is not None:
             d = m @ np.array([math.cos(heading), math.sin(heading), 0.0])
             heading = math.atan2(d[1], d[0])
-        return PersonDetection(s.t, float(x), float(y), world, cov, heading, s.heading_std,
-                               s.speed, s.turn_rate, s.velocity_std, s.track_id)
+        return replace(s, x=float(x), y=float(y), z=0.0, frame=world, covariance=cov,
+                       heading=heading)

@@ -19,11 +19,12 @@ import math
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 from companion.params import Params
 from companion.ros import convert
-from companion.ros.convert import Stamped, TimeBase
+from companion.ros.convert import TimeBase
 from companion.ros.settings import RosParams
 from companion.ros.transport import DEFAULT, SENSOR_DATA, Qos, Transport
 from companion.sim.episode import run_episode, timed_out
@@ -154,7 +155,7 @@ class WireRobot:
         if obs.detections:
             frames = {self.params.tracker.world_frame: r.odom_frame,
                       self.params.tracker.robot_frame: r.base_frame}
-            people = [Stamped.of(d, d.t, frames.get(d.frame, d.frame)) for d in obs.detections]
+            people = [replace(d, frame=frames.get(d.frame, d.frame)) for d in obs.detections]
             if self.person_type == "pose_array":
                 for frame in dict.fromkeys(p.frame for p in people):
                     group = [p for p in people if p.frame == frame]
