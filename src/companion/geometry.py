@@ -179,3 +179,11 @@ def _path_clearance(xs: np.ndarray, ys: np.ndarray, obstacles: ObstacleArrays,
 
 #: Smallest :func:`min_clearance` along the points ``(xs[i], ys[i])`` (compiled).
 path_clearance = kernel(_path_clearance)
+
+
+def major_std(cov: np.ndarray) -> float:
+    """The square root of the largest eigenvalue of the 2x2 position block of ``cov``: the
+    standard deviation (m) along the least certain direction (closed form, symmetrised)."""
+    a, c, b = cov[0, 0], cov[1, 1], 0.5 * (cov[0, 1] + cov[1, 0])
+    top = 0.5 * (a + c) + math.hypot(0.5 * (a - c), b)
+    return math.sqrt(max(float(top), 0.0))

@@ -1,10 +1,14 @@
 """``companion bench``: what users feel, measured on the figure-8 scenario (60 s, 1,200 steps).
 
 * ``step_us``: wall time of one ``step`` per registered controller, alone and in the standard
-  stack (supervisor, avoidance, controller): median and 99th percentile over every step of
-  :data:`LATENCY_ROUNDS` episodes after a warm-up episode, all controllers round-robin (so a
-  passing load on the machine does not fall on one of them); ``scipy`` is the LQR step with
-  scipy's Riccati solver, the reference;
+  stack (supervisor with the person tracker, avoidance, controller) with ideal sensing, and
+  for the stack also with ``realistic`` sensing: median and 99th percentile over every step
+  of :data:`LATENCY_ROUNDS` episodes after a warm-up episode, all round-robin (so a passing
+  load on the machine does not fall on one of them); ``scipy`` is the LQR step with scipy's
+  Riccati solver;
+* ``dare_us``: the reference unit, one scipy ``solve_discrete_are`` and gain on the 5x5
+  augmented model (median and p99 over operating points of the figure-8), measured in the
+  same run, and ``stack_per_dare``: each stack median over it;
 * ``throughput``: full-stack episodes through the runner (:func:`companion.sim.runner.run_many`),
   controller steps per second with one worker process and with one per CPU;
 * ``first_step_s``: a fresh process's first full-stack step (import included, an evasive check
@@ -28,6 +32,11 @@ from collections.abc import Callable
 import numpy as np
 
 from companion.control import CONTROLLERS, Controller, make_bare, make_controller
+from companion.control.lqr import augmented_model
+from companion.model import slot_reference
+from companion.params import Params
+from companion.params.sensing import REALISTIC
+from companion.riccati.reference import dlqr
 from companion.sim.episode import run_episode
 from companion.sim.runner import EpisodeSpec, default_workers, run_many
 from companion.sim.scenario import Scenario, load_scenario
@@ -44,6 +53,10 @@ class Timed:
         self.inner = inner
         self.seconds: list[float] = []
 
+    @property
+    def takes_detections(self) -> bool:
+        return getattr(self.inner, "takes_detections", False)
+
     def reset(self) -> None:
         self.inner.reset()
 
@@ -57,21 +70,42 @@ class Timed:
         self.inner.applied(cmd)
 
 
-def latencies_us(makers: dict[str, Callable[[], Controller]], sc: Scenario, duration: float,
-                 rounds: int = LATENCY_ROUNDS) -> dict[str, dict]:
-    """Median and p99 (us) of the step time of each controller of ``makers`` over ``rounds``
-    episodes of ``sc`` (``duration`` s) after a warm-up episode each, the controllers visited
-    in turn."""
-    timed = {name: Timed(make()) for name, make in makers.items()}
-    for t in timed.values():
-        run_episode(t, sc.person, sc.params, duration)
+def latencies_us(makers: dict[str, tuple[Callable[[], Controller], Params]], sc: Scenario,
+                 duration: float, rounds: int = LATENCY_ROUNDS) -> dict[str, dict]:
+    """Median and p99 (us) of the step time of each controller of ``makers`` (a factory and
+    the parameters of its episodes) over ``rounds`` episodes of ``sc``'s person (``duration``
+    s) after a warm-up episode each, the controllers visited in turn."""
+    timed = {name: (Timed(make()), params) for name, (make, params) in makers.items()}
+    for t, params in timed.values():
+        run_episode(t, sc.person, params, duration)
         t.seconds.clear()
     for _ in range(rounds):
-        for t in timed.values():
-            run_episode(t, sc.person, sc.params, duration)
+        for t, params in timed.values():
+            run_episode(t, sc.person, params, duration)
     return {name: {"median": float(np.median(np.asarray(t.seconds) * 1e6)),
                    "p99": float(np.percentile(np.asarray(t.seconds) * 1e6, 99))}
-            for name, t in timed.items()}
+            for name, (t, _) in timed.items()}
+
+
+def dare_us(sc: Scenario, points: int = 200, repeats: int = 5) -> dict[str, float]:
+    """Median and p99 (us) of one scipy ``solve_discrete_are`` plus gain (``dlqr`` without
+    its input checks) on the LQR's 5x5 augmented model, at ``points`` operating points (the
+    person on the figure-8 with the robot in its slot), each solved ``repeats`` times."""
+    p = sc.params
+    f, d = p.formation, p.robot.d
+    q, r = np.diag(p.lqr.q), np.diag(p.lqr.r)
+    seconds = []
+    for t in np.linspace(0.0, 60.0, points, endpoint=False):
+        h = sc.person.state(float(t))
+        ref = slot_reference(h.v, h.omega, f.distance, f.bearing, d)
+        a, b = augmented_model((f.distance, f.bearing, ref.beta), (ref.v, ref.omega),
+                               (h.v, h.omega), p)
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            dlqr(a, b, q, r, check=False)
+            seconds.append(time.perf_counter() - t0)
+    us = np.asarray(seconds) * 1e6
+    return {"median": float(np.median(us)), "p99": float(np.percentile(us, 99))}
 
 
 def episodes(sc: Scenario, n: int, duration: float, controller: str = "lqr"
@@ -150,18 +184,28 @@ def run(n_episodes: int = 48, duration: float = 60.0, workers: int | None = None
     if first_step:
         progress("first full-stack step in a fresh process (numba compile, then cached)")
         result["first_step_s"] = first_step_seconds()
-    progress(f"step latency: every controller alone and stacked, and the lqr with scipy's "
-             f"solver, {LATENCY_ROUNDS} episodes each, round-robin")
-    makers: dict[str, Callable[[], Controller]] = {}
+    progress(f"step latency: every controller alone and stacked (ideal and realistic "
+             f"sensing), and the lqr with scipy's solver, {LATENCY_ROUNDS} episodes each, "
+             f"round-robin")
+    ideal, realistic = sc.params, sc.params.replace(sensing=REALISTIC)
+    makers: dict[str, tuple[Callable[[], Controller], Params]] = {}
     for name in CONTROLLERS:
-        makers[name] = lambda n=name: make_bare(n, sc.params)
-        makers["stack " + name] = lambda n=name: make_controller(n, sc.params)
-    scipy = sc.params.replace(lqr=dataclasses.replace(sc.params.lqr, solver="scipy"))
-    makers["scipy"] = lambda: make_bare("lqr", scipy)
+        makers[name] = (lambda n=name: make_bare(n, ideal)), ideal
+        makers["stack " + name] = (lambda n=name: make_controller(n, ideal)), ideal
+        makers["realistic " + name] = (lambda n=name: make_controller(n, realistic)), realistic
+    scipy = ideal.replace(lqr=dataclasses.replace(ideal.lqr, solver="scipy"))
+    makers["scipy"] = (lambda: make_bare("lqr", scipy)), scipy
     latency = latencies_us(makers, sc, duration)
-    result["step_us"] = {name: {"alone": latency[name], "stack": latency["stack " + name]}
+    result["step_us"] = {name: {"alone": latency[name], "stack": latency["stack " + name],
+                                "stack_realistic": latency["realistic " + name]}
                          for name in CONTROLLERS}
     result["step_us"]["lqr with scipy"] = {"alone": latency["scipy"]}
+    progress("the reference unit: scipy's solve_discrete_are and gain on the 5x5 model")
+    dare = result["dare_us"] = dare_us(sc)
+    result["stack_per_dare"] = {
+        name: {where: s[where]["median"] / dare["median"]
+               for where in ("stack", "stack_realistic")}
+        for name, s in result["step_us"].items() if "stack" in s}
     specs = episodes(sc, n_episodes, duration)
     progress(f"full-stack throughput: {n_episodes} episodes with 1 worker, then {workers}")
     one, many = steps_per_s(specs, 1), steps_per_s(specs, workers)
@@ -177,11 +221,15 @@ def text(result: dict) -> str:
     lines = [f"companion bench on {m['cpu']} ({m['cpus']} CPUs, Python {m['python']}), "
              f"{result['scenario']} scenario, {result['episode_steps']} steps per episode",
              f"  {'step (us)':22s} {'alone median':>12s} {'p99':>8s} {'stack median':>13s} "
-             f"{'p99':>8s}"]
+             f"{'p99':>8s} {'realistic median':>17s} {'p99':>8s}"]
     for name, s in result["step_us"].items():
-        stack = s.get("stack")
-        tail = "" if stack is None else f" {stack['median']:13.1f} {stack['p99']:8.1f}"
+        tail = "".join(f" {s[k]['median']:{w}.1f} {s[k]['p99']:8.1f}"
+                       for k, w in (("stack", 13), ("stack_realistic", 17)) if k in s)
         lines.append(f"  {name:22s} {s['alone']['median']:12.1f} {s['alone']['p99']:8.1f}{tail}")
+    dare, ratio = result["dare_us"], result["stack_per_dare"]["lqr"]
+    lines.append(f"  scipy solve_discrete_are + gain (5x5): {dare['median']:.1f} us median, "
+                 f"{dare['p99']:.1f} p99; the lqr stack costs {ratio['stack']:.2f} of it "
+                 f"(ideal sensing), {ratio['stack_realistic']:.2f} (realistic)")
     tp = result["throughput"]
     lines.append(f"  full stack, {tp['episodes']} episodes: "
                  f"{tp['steps_per_s_one_worker']:,.0f} steps/s with 1 worker, "

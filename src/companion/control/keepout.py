@@ -44,6 +44,7 @@ from companion.geometry import (
     ObstacleArrays,
     clearance,
     lagged,
+    major_std,
     min_clearance,
     obstacle_arrays,
     segment_point,
@@ -114,7 +115,7 @@ def reaction_std(estimate: PersonEstimate, delay: float) -> float:
     estimate: its position and velocity uncertainty over the time the robot needs to react."""
     c = estimate.covariance
     pos = c[:2, :2] + delay * (c[:2, 2:4] + c[2:4, :2]) + delay * delay * c[2:4, 2:4]
-    return math.sqrt(max(float(np.linalg.eigvalsh(pos)[-1]), estimate.position_std ** 2, 0.0))
+    return max(major_std(pos), estimate.position_std)
 
 
 def heading_std(estimate: PersonEstimate) -> float:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.geometry import wrap_pi
+from companion.geometry import major_std, wrap_pi
 from companion.params import TrackerParams
 from companion.tracking.walker import (
     Belief,
@@ -164,8 +164,8 @@ class PersonTracker:
         dt = group[0].t - base.t
         best, best_d2 = None, p.gate_chi2
         for d in group:
-            innov = np.array((d.x - x[0], d.y - x[1]))
-            if math.hypot(*innov) > p.max_person_speed * dt + p.gate_floor_m + 3 * _std(d, p):
+            if math.hypot(d.x - x[0], d.y - x[1]) \
+                    > p.max_person_speed * dt + p.gate_floor_m + 3 * _std(d, p):
                 continue
             d2 = position_nis(x, cov, d, p, floor=p.gate_floor_m)
             if d2 <= best_d2:
@@ -240,7 +240,7 @@ class PersonTracker:
             return None
         belief = self._predicted(last, now)
         x, cov = belief.x, belief.p
-        std = math.sqrt(max(float(np.max(np.linalg.eigvalsh(cov[:2, :2]))), 0.0))
+        std = major_std(cov)
         if std > p.max_position_std_m:
             self.lost, self._candidate = True, []
             return None

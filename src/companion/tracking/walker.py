@@ -1,26 +1,25 @@
 """The walker's motion model and filter: an interacting multiple model (IMM) of two
-coordinated-turn unscented Kalman filters (filterpy), a steady walk and a manoeuvre.
+coordinated-turn unscented Kalman filters, a steady walk and a manoeuvre.
 
 The state is ``(x, y, vx, vy, omega)``: the velocity turns at the rate ``omega`` at constant
 speed. Cartesian velocity has no singularity at a standstill, so a person who stands may start
 to walk in any direction. Both models share this motion; they differ in process noise (white
 acceleration in x and y, and of the turn rate): the steady model is smooth, the manoeuvre
 model follows starts, stops and sharp turns. Their probabilities follow the detections, and
-the mixed covariance widens while the two disagree. docs/sensing.md explains the choices.
+the mixed covariance widens while the two disagree. The arithmetic is compiled
+(:mod:`.imm`); docs/sensing.md explains the choices.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
-from scipy.stats import multivariate_normal
 
-from companion.geometry import unicycle_step, wrap_pi, wrap_pi_array
+from companion.geometry import unicycle_step, wrap_pi
 from companion.params import TrackerParams
+from companion.tracking.imm import compiled_predict, compiled_update, mixture
 from companion.types import PersonDetection, PersonState
 
 #: Smallest standard deviation of a measurement in the filter (m, rad, m/s, rad/s): an exact
@@ -29,54 +28,10 @@ from companion.types import PersonDetection, PersonState
 MIN_STD = 1e-3
 
 
-def coordinated_turn(x: np.ndarray, dt: float) -> np.ndarray:
-    """The state ``(x, y, vx, vy, omega)`` ``dt`` s on: the velocity turns at the rate
-    ``omega`` at constant speed (the unicycle arc)."""
-    speed, heading = math.hypot(x[2], x[3]), math.atan2(x[3], x[2])
-    px, py, th = unicycle_step(x[0], x[1], heading, speed, x[4], dt)
-    return np.array((px, py, speed * math.cos(th), speed * math.sin(th), x[4]))
-
-
 def predict(person: PersonState, tau: float) -> PersonState:
-    """The person ``tau`` s on at constant speed and turn rate (:func:`coordinated_turn`)."""
+    """The person ``tau`` s on at constant speed and turn rate (:func:`.imm.coordinated_turn`)."""
     x, y, th = unicycle_step(person.x, person.y, person.theta, person.v, person.omega, tau)
     return PersonState(x, y, wrap_pi(th), person.v, person.omega)
-
-
-def process_noise(dt: float, accel_std: float, turn_accel_std: float) -> np.ndarray:
-    """Q over ``dt``: white acceleration in x and y (m/s^2) and of the turn rate (rad/s^2),
-    discrete white-noise form."""
-    q = np.zeros((5, 5))
-    a2 = accel_std ** 2
-    for i in (0, 1):
-        q[i, i] = a2 * dt ** 4 / 4.0
-        q[i, i + 2] = q[i + 2, i] = a2 * dt ** 3 / 2.0
-        q[i + 2, i + 2] = a2 * dt * dt
-    q[4, 4] = (turn_accel_std * dt) ** 2
-    return q
-
-
-def psd_sqrt(a: np.ndarray) -> np.ndarray:
-    """``U`` with ``U' U = a`` for a symmetric positive semi-definite ``a``, negative rounding
-    in its eigenvalues clipped (the sigma points' square root; a Cholesky factor would fail
-    on a covariance that rounding made slightly indefinite)."""
-    w, v = np.linalg.eigh(0.5 * (a + a.T))
-    return np.sqrt(np.maximum(w, 0.0))[:, None] * v.T
-
-
-def _unscented_transform(sigmas, wm, wc, noise_cov=None, mean_fn=None, residual_fn=None):
-    """filterpy's unscented transform, with the residuals of all sigma points at once."""
-    x = wm @ sigmas if mean_fn is None else mean_fn(sigmas, wm)
-    y = sigmas - x if residual_fn is None else residual_fn(sigmas, x)
-    p = (y.T * wc) @ y
-    return x, p if noise_cov is None else p + noise_cov
-
-
-class _Ukf(UnscentedKalmanFilter):
-    """filterpy's UKF with the cross variance computed for all sigma points at once."""
-
-    def cross_variance(self, x, z, sigmas_f, sigmas_h):
-        return ((sigmas_f - x).T * self.Wc) @ self.residual_z(sigmas_h, z)
 
 
 def is_exact(d: PersonDetection) -> bool:
@@ -95,22 +50,20 @@ def exact_detection(t: float, person: PersonState, frame: str = "world") -> Pers
 @dataclass(frozen=True)
 class Belief:
     """What the filter knows at one time: per model (steady, manoeuvre) the state and its
-    covariance, and the models' probabilities. ``x`` and ``p`` are their mixture."""
+    covariance, and the models' probabilities. ``x`` and ``p`` are their mixture (computed
+    here unless the kernel that made the belief gives them)."""
 
     xs: np.ndarray   # (2, 5)
     ps: np.ndarray   # (2, 5, 5)
     mu: np.ndarray   # (2,)
+    x: np.ndarray = None   # (5,)
+    p: np.ndarray = None   # (5, 5)
 
-    @property
-    def x(self) -> np.ndarray:
-        if np.array_equal(self.xs[0], self.xs[1]):    # exact where the models agree
-            return self.xs[0].copy()
-        return self.mu @ self.xs
-
-    @property
-    def p(self) -> np.ndarray:
-        d = self.xs - self.x
-        return np.einsum("m,mij->ij", self.mu, self.ps) + (d.T * self.mu) @ d
+    def __post_init__(self) -> None:
+        if self.x is None or self.p is None:
+            x, p = mixture(self.xs, self.ps, self.mu)
+            object.__setattr__(self, "x", x)
+            object.__setattr__(self, "p", p)
 
     @property
     def exact(self) -> bool:
@@ -120,14 +73,14 @@ class Belief:
 class WalkerFilter:
     """The IMM over :class:`Belief` values (module docstring): :meth:`start`,
     :meth:`predict` and :meth:`update` return new beliefs and keep none, so a tracker can
-    keep a history of them and re-filter late detections."""
+    keep a history of them and re-filter late detections. The arithmetic is compiled
+    (:mod:`.imm`); :class:`companion.tracking.reference.ReferenceFilter` is the same filter
+    on filterpy's UKF, which the tests compare it with."""
 
     def __init__(self, params: TrackerParams):
         self.params = params
-        points = MerweScaledSigmaPoints(5, 0.3, 2.0, 0.0, sqrt_method=psd_sqrt)
-        self._ukf = _Ukf(5, 2, 0.05, hx=None, fx=coordinated_turn, points=points)
-        self._noise = ((params.accel_std, params.turn_accel_std),
-                       (params.maneuver_accel_std, params.maneuver_turn_accel_std))
+        self._noise = np.array(((params.accel_std, params.turn_accel_std),
+                                (params.maneuver_accel_std, params.maneuver_turn_accel_std)))
 
     def start(self, d: PersonDetection) -> Belief:
         """A belief from one detection: what it measures, and wide priors for the rest (a
@@ -156,27 +109,8 @@ class WalkerFilter:
         if dt <= 0.0:
             return b
         p = self.params
-        start = 1.0 - math.exp(-p.maneuver_start_rate * dt)
-        end = 1.0 - math.exp(-p.maneuver_end_rate * dt)
-        switch = np.array(((1.0 - start, start), (end, 1.0 - end)))
-        prior = switch.T @ b.mu                       # model probabilities after dt
-        weights = switch * b.mu[:, None] / prior      # [i, j]: was i, given now j
-        xs, ps = np.empty_like(b.xs), np.empty_like(b.ps)
-        for j, noise in enumerate(self._noise):
-            x0 = weights[:, j] @ b.xs
-            d = b.xs - x0
-            p0 = np.einsum("m,mij->ij", weights[:, j], b.ps) + (d.T * weights[:, j]) @ d
-            q = process_noise(dt, *noise)
-            if not p0.any():                          # exact: its prediction is exact too
-                xs[j], ps[j] = coordinated_turn(x0, dt), q
-                continue
-            ukf = self._ukf
-            ukf.x, ukf.P, ukf.Q = x0, p0, q
-            ukf.predict(dt=dt, UT=_unscented_transform)
-            # the mean is the model's motion of the mean: the sigma points' mean would shrink
-            # the speed by E[cos(omega dt)] each step, a bias of a few percent at a steady walk
-            xs[j], ps[j] = coordinated_turn(x0, dt), 0.5 * (ukf.P + ukf.P.T)
-        return Belief(xs, ps, prior)
+        return Belief(*compiled_predict(b.xs, b.ps, b.mu, dt, self._noise,
+                                        p.maneuver_start_rate, p.maneuver_end_rate))
 
     def update(self, b: Belief, d: PersonDetection) -> Belief:
         """``b`` (at ``d``'s time) updated with ``d``; the models' probabilities by how well
@@ -184,36 +118,9 @@ class WalkerFilter:
         p = self.params
         if is_exact(d):
             return _both(exact_state(d), np.zeros((5, 5)), b.mu[1])
-        hx, z, r, angles = measurement(d, p)
-
-        def residual(a, c):
-            out = a - c
-            for k in angles:
-                out[..., k] = wrap_pi_array(out[..., k])
-            return out
-
-        ukf = self._ukf
-        ukf.residual_z = residual
-        xs, ps, log_l = np.empty_like(b.xs), np.empty_like(b.ps), np.empty(2)
-        for j in range(2):
-            ukf.x, ukf.P = b.xs[j].copy(), b.ps[j] + 1e-12 * np.eye(5)
-            ukf.sigmas_f = ukf.points_fn.sigma_points(ukf.x, ukf.P)
-            try:
-                ukf.update(z, R=r, UT=_unscented_transform, hx=hx)
-            except (ValueError, np.linalg.LinAlgError):   # a singular innovation: no update
-                xs[j], ps[j], log_l[j] = b.xs[j], b.ps[j], -math.inf
-                continue
-            x = ukf.x.copy()
-            speed = math.hypot(x[2], x[3])
-            if speed > p.max_person_speed:
-                x[2:4] *= p.max_person_speed / speed * (1.0 - 1e-12)   # rounding stays below
-            x[4] = min(max(x[4], -p.max_person_turn_rate), p.max_person_turn_rate)
-            xs[j], ps[j] = x, 0.5 * (ukf.P + ukf.P.T)
-            log_l[j] = _log_likelihood(ukf.y, ukf.S)
-        top = log_l.max()
-        mu = b.mu * (np.exp(log_l - top) if math.isfinite(top) else 1.0)
-        mu = np.clip(mu / mu.sum(), 1e-6, 1.0)
-        return Belief(xs, ps, mu / mu.sum())
+        z, r, heading, velocity = measurement(d, p)
+        return Belief(*compiled_update(b.xs, b.ps, b.mu, z, r, heading, velocity,
+                                       p.max_person_speed, p.max_person_turn_rate))
 
 
 def position_nis(x: np.ndarray, cov: np.ndarray, d: PersonDetection, p: TrackerParams,
@@ -221,13 +128,19 @@ def position_nis(x: np.ndarray, cov: np.ndarray, d: PersonDetection, p: TrackerP
     """Squared Mahalanobis distance of ``d``'s position from the state ``x`` with covariance
     ``cov`` (both covariances and ``floor`` m of tolerance together; 2 degrees of freedom, so
     about 2 on average when the filter is honest); inf where it cannot be computed."""
-    innov = np.array((d.x - x[0], d.y - x[1]))
-    s = cov[:2, :2] + position_cov(d, p) + floor ** 2 * np.eye(2)
-    try:
-        nis = float(innov @ np.linalg.solve(s, innov))
-    except np.linalg.LinAlgError:
+    dx, dy = d.x - x[0], d.y - x[1]
+    if d.covariance is None:
+        ra, rb, rc = p.position_std_m ** 2, 0.0, p.position_std_m ** 2
+    else:
+        ra, rb, rc = d.covariance[0], 0.5 * (d.covariance[1] + d.covariance[2]), d.covariance[3]
+    a = cov[0, 0] + ra + floor ** 2
+    c = cov[1, 1] + rc + floor ** 2
+    b = 0.5 * (cov[0, 1] + cov[1, 0]) + rb
+    det = a * c - b * b
+    if not det > 0.0:
         return math.inf
-    return nis if math.isfinite(nis) else math.inf
+    nis = (c * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / det
+    return float(nis) if math.isfinite(nis) else math.inf
 
 
 def widened(cov: np.ndarray, k: float) -> np.ndarray:
@@ -241,19 +154,10 @@ def widened(cov: np.ndarray, k: float) -> np.ndarray:
     return cov * np.outer(d, d)
 
 
-def _log_likelihood(y: np.ndarray, s: np.ndarray) -> float:
-    """log N(y; 0, S) of the innovation, with S symmetrised (the unscented transform leaves it
-    asymmetric by rounding) and -inf where it is not a covariance (never raises)."""
-    s = 0.5 * (s + s.T)
-    try:
-        value = multivariate_normal.logpdf(y, cov=s, allow_singular=True)
-    except (ValueError, np.linalg.LinAlgError):
-        return -math.inf
-    return float(value) if math.isfinite(value) else -math.inf
-
-
 def _both(x: np.ndarray, p: np.ndarray, maneuver: float) -> Belief:
-    return Belief(np.array((x, x)), np.array((p, p)), np.array((1.0 - maneuver, maneuver)))
+    """Both models at ``(x, p)`` (so is their mixture)."""
+    return Belief(np.array((x, x)), np.array((p, p)), np.array((1.0 - maneuver, maneuver)),
+                  x, p)
 
 
 def exact_state(d: PersonDetection) -> np.ndarray:
@@ -266,25 +170,25 @@ def position_cov(d: PersonDetection, p: TrackerParams) -> np.ndarray:
     """The 2x2 covariance of the detection's position (the tracker's default without one)."""
     if d.covariance is None:
         return p.position_std_m ** 2 * np.eye(2)
-    return np.reshape(np.asarray(d.covariance, dtype=float), (2, 2))
+    return np.array(d.covariance, dtype=float).reshape(2, 2)
 
 
 def heading_std(d: PersonDetection, p: TrackerParams) -> float:
     return p.heading_std_rad if d.heading_std is None else d.heading_std
 
 
-def measurement(d: PersonDetection, p: TrackerParams):
-    """What ``d`` measures of the state: ``(hx, z, R, angles)``, the measurement function,
-    the measurement, its noise covariance and which of its components are angles."""
-    parts: list[Callable[[np.ndarray], list[float]]] = [lambda s: [s[0], s[1]]]
-    z, stds, angles = [d.x, d.y], [], []
-    if d.heading is not None:
-        parts.append(lambda s: [math.atan2(s[3], s[2])])
-        angles.append(len(z))
+def measurement(d: PersonDetection, p: TrackerParams
+                ) -> tuple[np.ndarray, np.ndarray, bool, bool]:
+    """What ``d`` measures of the state: ``(z, R, heading, velocity)``, the measurement
+    (:func:`.imm.measured`: position, the heading if ``heading``, the speed and turn rate if
+    ``velocity``) and its noise covariance."""
+    z, stds = [d.x, d.y], []
+    heading = d.heading is not None
+    velocity = d.speed is not None and d.turn_rate is not None
+    if heading:
         z.append(d.heading)
         stds.append(heading_std(d, p))
-    if d.speed is not None and d.turn_rate is not None:
-        parts.append(lambda s: [math.hypot(s[2], s[3]), s[4]])
+    if velocity:
         z += [d.speed, d.turn_rate]
         stds += list(d.velocity_std or (p.initial_speed_std, p.initial_turn_rate_std))
     r = np.zeros((len(z), len(z)))
@@ -292,8 +196,4 @@ def measurement(d: PersonDetection, p: TrackerParams):
     for k, s in enumerate(stds, start=2):
         r[k, k] = s * s
     r += MIN_STD ** 2 * np.eye(len(z))   # floor
-
-    def hx(s: np.ndarray) -> np.ndarray:
-        return np.array([v for part in parts for v in part(s)])
-
-    return hx, np.array(z), r, angles
+    return np.array(z, dtype=float), r, heading, velocity
