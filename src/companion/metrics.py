@@ -12,7 +12,11 @@
 * final absolute errors (last sample, beta against beta_ref);
 * obstacle clearance (robot footprint to the nearest obstacle surface) and the number of
   separate collisions;
-* the shares of the samples in which the safety supervisor was ok, degraded or stopped.
+* the shares of the samples in which the safety supervisor was ok, degraded or stopped;
+* where the slot error comes from (docs/sensing.md): the RMS of the slot error, of the
+  estimate's own error and of the tracking of the estimated slot (over the samples with an
+  estimate), and the displacement the keep-out imposed, summed over the run, with the share
+  of samples in which it acted.
 """
 
 from __future__ import annotations
@@ -175,6 +179,33 @@ RMS = {
 }
 
 
+class Split:
+    """Where the slot error comes from (the log's ``slot_error_m``, ``estimate_error_m``,
+    ``tracking_error_m`` and ``safety_shift_m``) over consecutive blocks."""
+
+    def __init__(self) -> None:
+        self._squares = {"slot": 0.0, "estimate": 0.0, "tracking": 0.0}
+        self._n = {"slot": 0, "estimate": 0, "tracking": 0}
+        self._shift, self._acted = 0.0, 0
+
+    def add(self, log: Log) -> None:
+        for key in self._squares:
+            e = log[f"{key}_error_m"]
+            e = e[np.isfinite(e)]
+            self._squares[key] += float(np.sum(e * e))
+            self._n[key] += len(e)
+        shift = log["safety_shift_m"]
+        self._shift += float(np.sum(shift))
+        self._acted += int(np.count_nonzero(shift > 1e-9))
+
+    def value(self, steps: int) -> dict:
+        out = {f"rms_{key}_error_m": math.sqrt(sq / self._n[key]) if self._n[key] else None
+               for key, sq in self._squares.items()}
+        out["safety_shift_m"] = self._shift
+        out["safety_share"] = self._acted / steps if steps else 0.0
+        return out
+
+
 class Running:
     """All the metrics of :func:`compute` over consecutive blocks of one episode's log:
     ``add`` each block in order, then ``value()``. Sums of squares, minima and counts are
@@ -187,6 +218,7 @@ class Running:
         self._settling = Settling(tol)
         self._obstacles = Obstacles()
         self._statuses = Statuses()
+        self._split = Split()
         self._finite = True
         self._times: list[float] = []          # the first two sample times
         self._last: tuple[float, dict] = (math.nan, {})
@@ -203,6 +235,7 @@ class Running:
         self._settling.add(log, e)
         self._obstacles.add(log)
         self._statuses.add(log)
+        self._split.add(log)
         self._finite = self._finite and bool(np.all(np.isfinite(log["v"]))
                                              and np.all(np.isfinite(log["omega"])))
         t = log["t"]
@@ -229,6 +262,7 @@ class Running:
         }
         values.update(self._obstacles.value())
         values.update(self._statuses.value())
+        values.update(self._split.value(self.steps))
         values["finite"] = bool(self._finite and math.isfinite(rms["rmse_rho_m"])
                                 and math.isfinite(rms["rmse_alpha_rad"]))
         return values

@@ -158,8 +158,10 @@ class Command:
     """Robot input: linear velocity v (m/s) and angular velocity omega (rad/s).
 
     ``u_ob`` (rad/s) is the part of omega that obstacle avoidance added. ``status`` ("ok",
-    "degraded" or "stopped"), ``reason`` (empty when ok) and ``estimate`` (the person estimate
-    the command was made for) are set by the safety supervisor.
+    "degraded" or "stopped"), ``reason`` (empty when ok), ``estimate`` (the person estimate
+    the command was made for) and ``requested`` (the wrapped controller's ``(v, omega)``
+    within the rate limits, before the keep-out changed it; None without a controller step)
+    are set by the safety supervisor.
     """
 
     v: float
@@ -168,19 +170,26 @@ class Command:
     status: str = "ok"
     reason: str = ""
     estimate: PersonEstimate | None = None
+    requested: tuple[float, float] | None = None
 
 
 LOG_COLUMNS = ("t", "robot_x", "robot_y", "robot_theta", "person_x", "person_y",
                "person_theta", "person_v", "person_omega", "rho", "alpha", "beta",
                "rho_d", "alpha_d", "beta_ref", "v", "omega", "u_ob", "rho_ob",
                "robot_v", "robot_omega", "person_est_x", "person_est_y", "person_est_theta",
-               "person_est_v", "person_est_omega", "person_est_std")
+               "person_est_v", "person_est_omega", "person_est_std", "slot_error_m",
+               "estimate_error_m", "tracking_error_m", "safety_shift_m")
 """Numeric columns of an episode log: the true state of robot and person, the relative state,
 ``beta_ref`` (heading offset that holding the slot needs), the command (``v``, ``omega``),
 ``u_ob`` (the avoidance part of omega, rad/s), ``rho_ob`` (clearance from the robot's
 footprint to the nearest true obstacle surface, m; NaN without obstacles), the robot's actual
-velocity (``robot_v``, ``robot_omega``; behind the command by the actuator lag) and the
-tracker's estimate of the person with its position std (NaN without one)."""
+velocity (``robot_v``, ``robot_omega``; behind the command by the actuator lag), the
+tracker's estimate of the person with its position std (NaN without one), and where the slot
+error comes from (docs/sensing.md): ``slot_error_m`` from the robot's reference point R to the
+true person's slot, ``estimate_error_m`` from the slot the estimate implies to the true one,
+``tracking_error_m`` from R to the estimated slot (both NaN without an estimate), and
+``safety_shift_m``, how far the keep-out moved R in this step (the executed command's motion
+of R over one period against the controller's request; 0 without a request)."""
 
 TEXT_COLUMNS = ("status", "reason")
 """The safety supervisor's status and reason per sample ("ok" and "" without one)."""

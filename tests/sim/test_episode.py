@@ -6,6 +6,7 @@ import pytest
 from companion.control import make_bare, make_controller
 from companion.errors import ConfigError
 from companion.geometry import lagged, unicycle_step, wrap_pi, wrap_pi_array
+from companion.metrics import compute
 from companion.params import REALISTIC, Params
 from companion.sim.episode import run_episode
 from companion.sim.person import Figure8, circle, line
@@ -102,3 +103,28 @@ def test_any_bearing_on_a_circle(side, bearing):
     assert np.max(np.abs(alpha_e)) < 0.01
     dist = np.hypot(log["robot_x"] - log["person_x"], log["robot_y"] - log["person_y"])
     assert np.min(dist) > 0.5
+
+
+def test_the_slot_error_splits_into_estimate_tracking_and_safety():
+    """Per sample: the slot error is at most the estimate's error plus the tracking error
+    (a triangle); with ideal sensing the estimate is exact; the keep-out's shift is 0 where
+    it did not act and the metrics sum what the log holds."""
+    ideal = run_episode(make_controller("lqr", Params()), Figure8(60.0), Params(), 10.0)
+    np.testing.assert_allclose(ideal["estimate_error_m"], 0.0, atol=1e-9)
+    np.testing.assert_allclose(ideal["tracking_error_m"], ideal["slot_error_m"], atol=1e-9)
+    p = Params(sensing=REALISTIC)
+    log = run_episode(make_controller("lqr", p), Figure8(60.0), p, 20.0, seed=1)
+    seen = np.isfinite(log["estimate_error_m"])
+    assert seen.mean() > 0.9
+    slot, est, track = (log[k][seen] for k in ("slot_error_m", "estimate_error_m",
+                                                "tracking_error_m"))
+    assert np.all(slot <= est + track + 1e-9)
+    assert 0.01 < np.median(est) < 0.3
+    quiet = np.array(["evasive" not in r and "protective_zone" not in r and "stop_path" not in r
+                      for r in log["reason"]])
+    assert np.all(log["safety_shift_m"][quiet] == 0.0)
+    m = compute(log)
+    assert m["safety_shift_m"] == pytest.approx(float(np.sum(log["safety_shift_m"])))
+    assert m["safety_share"] == pytest.approx(np.mean(log["safety_shift_m"] > 1e-9))
+    assert m["rms_estimate_error_m"] == pytest.approx(np.sqrt(np.mean(est ** 2)))
+    assert m["rms_slot_error_m"] <= m["rms_estimate_error_m"] + m["rms_tracking_error_m"] + 1e-9

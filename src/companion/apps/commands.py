@@ -230,6 +230,15 @@ def walkers_text(table: dict, paired: dict) -> str:
         lines.append(f"{name:10s} {r['runs']:5d} {r['median_rho_m'] * 100:13.2f} "
                      f"{r['p90_rho_m'] * 100:10.2f} {r['median_alpha_rad']:12.3f} "
                      f"{r['min_distance_m']:9.3f}")
+    lines.append("where the slot error comes from (medians over runs of each run's RMS, cm; "
+                 "the keep-out's displacement in m and the share of steps it acted)")
+    lines.append(f"{'controller':10s} {'slot':>7s} {'estimate':>9s} {'tracking':>9s} "
+                 f"{'keep-out m':>10s} {'acting':>7s}")
+    for name, r in table.items():
+        cells = [r[f"median_rms_{k}_error_m"] for k in ("slot", "estimate", "tracking")]
+        lines.append(f"{name:10s} " + " ".join(
+            f"{'-' if v is None else f'{v * 100:.2f}':>{w}s}" for v, w in zip(cells, (7, 9, 9)))
+            + f" {r['median_safety_shift_m']:10.3f} {r['median_safety_share']:7.1%}")
     for name, r in paired.items():
         lines.append(f"paired with {name}: better rho in {r['better_rho']:.0%} of runs (median "
                      f"difference {r['median_diff_rho'] * 100:+.2f} cm), better alpha in "

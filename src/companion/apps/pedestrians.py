@@ -20,7 +20,9 @@ from companion.types import Log
 
 #: Per-run columns of ``pedestrians.csv``.
 COLUMNS = ("scene", "ped_id", "side", "controller", "duration_s", "mean_speed_mps",
-           "rmse_rho_m", "rmse_alpha_rad", "min_person_distance_m", "share_stopped", "finite")
+           "rmse_rho_m", "rmse_alpha_rad", "min_person_distance_m", "share_stopped", "finite",
+           "rms_slot_error_m", "rms_estimate_error_m", "rms_tracking_error_m",
+           "safety_shift_m", "safety_share")
 
 
 def episode(track: Track, params: Params, controller: str = "lqr", side: str = "left",
@@ -36,8 +38,7 @@ def episode(track: Track, params: Params, controller: str = "lqr", side: str = "
 def summary(log: Log) -> dict:
     """The metrics of one run that ``companion pedestrians`` reports."""
     m = compute(log)
-    return {k: m[k] for k in ("rmse_rho_m", "rmse_alpha_rad", "min_person_distance_m",
-                              "share_stopped", "finite")}
+    return {k: m[k] for k in COLUMNS[6:]}
 
 
 def evaluate(tracks: Sequence[Track], params: Params, controllers: Sequence[str] = ("lqr",),
@@ -55,7 +56,8 @@ def evaluate(tracks: Sequence[Track], params: Params, controllers: Sequence[str]
 
 def table(rows: Sequence[dict]) -> dict[str, dict]:
     """Per controller: runs, median and 90th percentile of RMSE rho, median RMSE alpha, the
-    closest approach to the true person and the share of runs that ever stopped."""
+    closest approach to the true person, whether every run stayed finite, and the medians of
+    the slot error's split (:class:`companion.metrics.Split`)."""
     out = {}
     for name in dict.fromkeys(r["controller"] for r in rows):
         mine = [r for r in rows if r["controller"] == name]
@@ -64,8 +66,17 @@ def table(rows: Sequence[dict]) -> dict[str, dict]:
                      "p90_rho_m": float(np.percentile(rho, 90)),
                      "median_alpha_rad": float(np.median([r["rmse_alpha_rad"] for r in mine])),
                      "min_distance_m": float(min(r["min_person_distance_m"] for r in mine)),
-                     "all_finite": all(r["finite"] for r in mine)}
+                     "all_finite": all(r["finite"] for r in mine),
+                     **{f"median_{k}": _median([r[k] for r in mine])
+                        for k in ("rms_slot_error_m", "rms_estimate_error_m",
+                                  "rms_tracking_error_m", "safety_shift_m", "safety_share")}}
     return out
+
+
+def _median(values: Sequence[float | None]) -> float | None:
+    """The median of the values that are not None (None if none is)."""
+    known = [v for v in values if v is not None]
+    return float(np.median(known)) if known else None
 
 
 def paired(rows: Sequence[dict], reference: str = "lqr") -> dict[str, dict]:

@@ -117,12 +117,15 @@ class SafetySupervisor:
                 stepped, target = True, (cmd.v, cmd.omega, cmd.u_ob)
             else:
                 stop = "controller_fault"
+        requested = None
         if stop:
             target = (0.0, 0.0, 0.0)
             self._inner_fresh = True
             self._far_since = None    # a stop restarts the slot-error clock
         else:
             self._check_slot(obs.robot, estimate, reasons)
+            if stepped:
+                requested = limit(target[:2], self._prev, p)
             target = keep_out(target, obs.robot, estimate, obstacles, velocity, p, reasons,
                               self._prev)
         self._prev = limit(target[:2], self._prev, p)
@@ -131,7 +134,7 @@ class SafetySupervisor:
             self.inner.applied(final)
         status = STOPPED if stop else DEGRADED if reasons else OK
         reason = "+".join(dict.fromkeys([stop] * bool(stop) + reasons))
-        return Command(final.v, final.omega, final.u_ob, status, reason, estimate)
+        return Command(final.v, final.omega, final.u_ob, status, reason, estimate, requested)
 
     def applied(self, cmd: Command) -> None:
         """Told the command the robot executes outside a step (its velocity at the start of an

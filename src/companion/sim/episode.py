@@ -18,8 +18,9 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 
 from companion.control.base import Controller
+from companion.control.slot import reference_point, slot_point
 from companion.errors import ConfigError
-from companion.geometry import base_step, clearance, wrap_pi
+from companion.geometry import base_step, clearance, offset_point, unicycle_step, wrap_pi
 from companion.model import relative_state, robot_pose_at, slot_reference
 from companion.params import IDEAL, Params
 from companion.sim.faults import Fault, stalled
@@ -44,6 +45,32 @@ def nearest_clearance(x: float, y: float, obstacles: Sequence[Obstacle], footpri
     if not obstacles:
         return math.nan
     return min(clearance(ob, x, y, footprint) for ob in obstacles)
+
+
+def error_split(robot: Pose, person: PersonState, cmd: Command, params: Params
+                ) -> tuple[float, float, float, float]:
+    """Where the slot error of one sample comes from (the log's last four columns):
+    ``(slot_error, estimate_error, tracking_error, safety_shift)`` in metres. The slot error
+    is from R (the reference point) to the true person's slot; the estimate's error from the
+    slot that ``cmd.estimate`` implies (its formation's person) to the true slot; tracking,
+    from R to that estimated slot; the safety shift, between the two places R reaches in one
+    period under ``cmd`` and under ``cmd.requested`` (0 without a request)."""
+    d, dt = params.robot.d, params.dt
+    rx, ry = reference_point(robot, d)
+    sx, sy = slot_point(person, params)
+    est = cmd.estimate
+    if est is None:
+        estimate_error = tracking_error = math.nan
+    else:
+        ex, ey = slot_point(est.walker, params)
+        estimate_error = math.hypot(ex - sx, ey - sy)
+        tracking_error = math.hypot(rx - ex, ry - ey)
+    shift = 0.0
+    if cmd.requested is not None and cmd.requested != (cmd.v, cmd.omega):
+        ends = [offset_point(*unicycle_step(robot.x, robot.y, robot.theta, v, w, dt), d)
+                for v, w in ((cmd.v, cmd.omega), cmd.requested)]
+        shift = math.hypot(ends[0][0] - ends[1][0], ends[0][1] - ends[1][1])
+    return math.hypot(rx - sx, ry - sy), estimate_error, tracking_error, shift
 
 
 def timed_out(command: tuple[float, float], params: Params) -> tuple[float, float]:
@@ -177,7 +204,8 @@ def episode_blocks(controller: Controller, person: PersonMotion, params: Params,
         beta_ref = slot_reference(h.v, h.omega, f.distance, f.bearing, d).beta
         block.add((t, x, y, th, h.x, h.y, h.theta, h.v, h.omega, rho, alpha, beta,
                    f.distance, f.bearing, beta_ref, cmd.v, cmd.omega, cmd.u_ob,
-                   nearest_clearance(x, y, obstacles, params.robot.radius), va, wa, *est),
+                   nearest_clearance(x, y, obstacles, params.robot.radius), va, wa, *est,
+                   *error_split(Pose(x, y, th), h, cmd, params)),
                   cmd.status, cmd.reason)
         if block.full() or k == n - 1:
             yield block.log()
