@@ -12,6 +12,7 @@ from companion.apps import table3
 from companion.apps.cli import main
 from companion.apps.reproduce import PAPER_TABLE2, TABLE2_COLUMNS, TRAJECTORIES
 from companion.control import CONTROLLERS
+from companion.params import REALISTIC
 from companion.sim.runner import run_one
 
 
@@ -97,19 +98,22 @@ def test_the_figures_quoted_in_the_readme_and_docs(out):
     assert float(fig4["lqr"]["rmse_alpha_rad"]) == pytest.approx(0.192, abs=5e-4)
 
 
-def test_table3_is_the_mean_of_realistic_runs_of_every_controller(out):
+def test_table3_is_the_mean_of_runs_of_every_controller_under_each_sensing(out):
     rows = _rows(out / "table3.csv")
     assert tuple(rows[0]) == table3.COLUMNS
-    assert {(r["trajectory"], r["controller"]) for r in rows} == {
-        (t, c) for t in table3.EXPERIMENTS for c in CONTROLLERS}
+    assert {(r["trajectory"], r["sensing"], r["controller"]) for r in rows} == {
+        (t, s, c) for t in table3.EXPERIMENTS for s in ("em-tracker", "realistic")
+        for c in CONTROLLERS}
     assert all(int(r["runs"]) == len(table3.SEEDS) for r in rows)
     md = (out / "table3.md").read_text()
     assert "0.226" in md and "0.068" in md                # the paper's numbers beside ours
     # the LQR's U-shaped row is the mean of its seeds run one at a time, with realistic sensing
-    jobs = [spec for traj, ctl, spec in table3.jobs(["lqr"]) if traj == "U-shaped"]
-    assert all(spec.params.sensing.actuator_tau_s > 0 for spec in jobs)
+    jobs = [spec for traj, sensing, ctl, spec in table3.jobs(["lqr"])
+            if traj == "U-shaped" and sensing == "realistic"]
+    assert all(spec.params.sensing == REALISTIC for spec in jobs)
     single = [metrics.compute(run_one(spec)) for spec in jobs]
-    row = next(r for r in rows if r["trajectory"] == "U-shaped" and r["controller"] == "lqr")
+    row = next(r for r in rows if r["trajectory"] == "U-shaped" and r["controller"] == "lqr"
+               and r["sensing"] == "realistic")
     for key in table3.METRICS:
         assert float(row[key]) == pytest.approx(np.mean([m[key] for m in single]), rel=1e-9)
     assert float(row["min_person_distance_m"]) >= 0.5

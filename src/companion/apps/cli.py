@@ -35,8 +35,8 @@ class OneLineParser(argparse.ArgumentParser):
 
 
 def _sensing(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--sensing", metavar="PROFILE", help="ideal, realistic or a TOML file of "
-                   "sensing keys (docs/sensing.md); default: the scenario's, else ideal")
+    p.add_argument("--sensing", metavar="PROFILE", help="ideal, realistic, em-tracker or a TOML "
+                   "file of sensing keys (docs/sensing.md); default: the scenario's, else ideal")
 
 
 def _workers(p: argparse.ArgumentParser) -> None:
@@ -164,9 +164,9 @@ def parser() -> argparse.ArgumentParser:
                          "(default 0)")
     fz.add_argument("--controllers", metavar="A,B", help=f"controllers (default all: "
                     f"{','.join(CONTROLLERS)})")
-    fz.add_argument("--sensing", metavar="A,B", help="sensing profiles: ideal, realistic or "
-                    "TOML files of sensing keys (docs/sensing.md), separated by commas "
-                    "(default: ideal,realistic)")
+    fz.add_argument("--sensing", metavar="A,B", help="sensing profiles: ideal, realistic, "
+                    "em-tracker or TOML files of sensing keys (docs/sensing.md), separated by "
+                    "commas (default: ideal,realistic)")
     fz.add_argument("--replay", type=int, metavar="SEED", help="run the episode of this seed "
                     f"({rng('--replay', 'SEED')}; a row of fuzz.csv) with one --controllers and "
                     "one --sensing, and write its log.csv and episode.json")
@@ -221,9 +221,9 @@ def _ros_commands(sub) -> None:
                     f"{rng('--duration', 'S')} (default: run until SIGINT or SIGTERM)")
     nd.add_argument("--bag", metavar="DIR", help="record what the node receives and sends, "
                     "and a Foxglove scene, as a ROS 2 bag (MCAP) (docs/recording.md)")
-    nd.add_argument("--sensing", metavar="PROFILE", help="ideal, realistic or a TOML file "
-                    "of sensing keys: the base's actuator lag the node allows for, as sim-robot "
-                    "--sensing (docs/sensing.md); default: the parameters'")
+    nd.add_argument("--sensing", metavar="PROFILE", help="ideal, realistic, em-tracker or a "
+                    "TOML file of sensing keys: the base's actuator lag the node allows for, as "
+                    "sim-robot --sensing (docs/sensing.md); default: the parameters'")
     _transport(nd)
     nd.set_defaults(func="rosapps.cmd_node")
 

@@ -338,8 +338,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     print(reproduce.table2_text(result.table2))
     print("Fig. 4 (figure-8 with the obstacle, every controller):")
     print(reproduce.fig4_text(result.fig4))
-    print("Table 3 (realistic sensing, mean over seeds; paper's LQR on the real robot at the "
-          "right):")
+    print("Table 3 (em-tracker and realistic sensing, mean over seeds; the paper's LQR on the "
+          "real robot at the right of ours under em-tracker):")
     print(table3.text(result.table3))
     print(f"wrote table2.csv, table2.md, table3.csv, table3.md, fig3.csv, fig4.csv, the "
           f"Fig. 3, 4, 7 PNGs and fig4.gif in {out}")

@@ -46,7 +46,7 @@ def selection(args) -> tuple[tuple[str, ...], dict[str, SensingParams]]:
     names or TOML files of sensing keys (docs/sensing.md), separated by commas."""
     controllers = names_arg(args.controllers, tuple(CONTROLLERS), "--controllers")
     if args.sensing is None:
-        return controllers, dict(PROFILES)
+        return controllers, dict(fuzz.FUZZ_PROFILES)
     names = tuple(n.strip() for n in args.sensing.split(","))
     if not all(names) or len(set(names)) != len(names):
         raise UsageError(f"--sensing: expected distinct profile names or .toml files "

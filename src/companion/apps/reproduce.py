@@ -136,7 +136,7 @@ def reproduce(out: Path, workers: int | None = None, progress: Progress | None =
     specs += [load_scenario(TRAJECTORIES[traj]).episode(ctl) for traj, ctl in table2_jobs]
     specs += [fig4.episode(ctl) for ctl in names] + [fig7.episode("lqr")]
     table3_jobs = table3.jobs(names)
-    specs += [spec for _, _, spec in table3_jobs]
+    specs += [spec for *_, spec in table3_jobs]
     logs = iter(run_many(specs, workers, progress=progress))
     fig3_runs: dict[float, list] = {}
     fig3_rows = []

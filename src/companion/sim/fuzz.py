@@ -50,6 +50,10 @@ SEED_STRIDE = 10_000_000
 TOLERANCE = 0.01
 START_KINDS = ("slot", "rest", "moving")
 
+#: The sensing profiles the fuzz runs unless told otherwise: the paper's setting and a leg
+#: tracker (docs/safety.md).
+FUZZ_PROFILES = {name: PROFILES[name] for name in ("ideal", "realistic")}
+
 
 @dataclass(frozen=True)
 class Case:
