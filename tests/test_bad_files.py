@@ -123,7 +123,8 @@ def test_outputs_are_written_whole_or_not_at_all(tmp_path):
 
 
 @pytest.mark.parametrize("flag, text, words", [
-    ("fast", None, ["--sensing: expected ideal or realistic or em-tracker or a .toml file", "'fast'"]),
+    ("fast", None, ["--sensing: expected ideal or realistic or em-tracker or a .toml file",
+                    "'fast'"]),
     ("FILE", "person_rate_hz = 10\nperson_noise = 0.1\n",
      ["sens.toml: person_noise: unknown key", "did you mean", "person_position_noise_m"]),
     ("FILE", "person_latency_s = -0.1\n", ["sens.toml: person_latency_s", "expected"]),

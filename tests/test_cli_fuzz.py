@@ -85,8 +85,8 @@ def test_a_bad_params_file_for_fuzz_names_the_file_and_key(tmp_path, capsys):
     (["--seed", "-1"], "--seed: expected 0 <= N <= 2**63-1, got '-1'"),
     (["--controllers", "lqr,foo"], "--controllers: expected distinct names from lqr, lqr-paper"),
     (["--controllers", "lqr,lqr"], "--controllers: expected distinct names"),
-    (["--sensing", "noisy"], "--sensing: expected ideal or realistic or em-tracker or a .toml file, got "
-     "'noisy'"),
+    (["--sensing", "noisy"], "--sensing: expected ideal or realistic or em-tracker or a .toml "
+     "file, got 'noisy'"),
     (["--sensing", "ideal,,realistic"], "--sensing: expected distinct profile names or .toml "
      "files separated by commas"),
     (["--sensing", "ideal,ideal"], "--sensing: expected distinct profile names"),

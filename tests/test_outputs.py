@@ -150,7 +150,7 @@ def test_a_kill_at_any_step_of_the_switch_leaves_one_whole_set(tmp_path):
     assert child.exitcode == 0 and seen == {False, True}   # every step was cut, both sets seen
 
 
-def _start(out, duration="600"):
+def _start(out, duration="36000"):
     return subprocess.Popen([sys.executable, "-m", "companion.apps.cli", "run", "line",
                              "--duration", duration, "--out", str(out)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)

@@ -133,8 +133,9 @@ class Scan:
 class Observation:
     """What the robot knows at one sample: time (s), robot pose, the person, the obstacles
     known at that time (world frame), the LiDAR scan they came from (None without a LiDAR),
-    the robot's measured velocity ``(v, omega)`` from odometry (None: unknown) and the person
-    detections that arrived since the last sample.
+    the robot's measured velocity ``(v, omega)`` from odometry (None: unknown), the person
+    detections that arrived since the last sample, the sources that are stale, and the time
+    of the odometry sample the velocity comes from (None: ``t``).
 
     The standard stack's input is the detections: its safety supervisor tracks the person
     from them and hands the layers inside it ``person``, the estimate. A ``person`` given to
@@ -151,6 +152,7 @@ class Observation:
     robot_velocity: tuple[float, float] | None = None
     detections: tuple[PersonDetection, ...] = ()
     stale: tuple[str, ...] = ()
+    robot_stamp: float | None = None
 
 
 @dataclass(frozen=True)

@@ -282,3 +282,31 @@ def test_sim_robot_logs_the_node_status_and_its_command_timeout():
     assert set(log["reason"][braking]) == {"command_timeout"}
     dv = -np.diff(log["v"][braking])
     assert np.all(dv <= p.supervisor.decel_max * p.dt + 1e-12) and log["v"][-1] == 0.0
+
+
+def test_the_robot_logs_the_nodes_estimate_and_the_status_its_measured_delays():
+    """sim-robot takes the node's person estimate from /companion/status, so a two-process run
+    splits its slot error as an in-process one does; the status carries the detection
+    latency and actuator lag the supervisor measured."""
+    spec, log, robot, _ = lockstep("realistic", "odometry", 10.0)
+    seen = np.isfinite(log["estimate_error_m"])
+    assert seen.mean() > 0.9
+    assert np.median(log["estimate_error_m"][seen]) < 0.2
+    m = metrics.compute(log)
+    assert m["rms_estimate_error_m"] is not None and m["rms_tracking_error_m"] is not None
+    cmd = convert.status_msg(1.0, robot_command(), None, delays=(0.125, 0.2))
+    values = {kv.key: kv.value for kv in cmd.status[0].values}
+    assert float(values["latency_measured_s"]) == 0.125
+    assert float(values["actuator_tau_measured_s"]) == 0.2
+    back = convert.estimate_of(cmd)
+    assert back is not None and back.state.x == pytest.approx(1.5)
+    assert convert.estimate_of(convert.status_msg(1.0, robot_command(None), None)) is None
+
+
+def robot_command(estimate=...):
+    from companion.types import Command, PersonEstimate, PersonState
+
+    if estimate is ...:
+        s = PersonState(1.5, 2.0, 0.3, 1.0, 0.1)
+        estimate = PersonEstimate(s, 0.05, np.zeros((5, 5)), 0.0, "seen", s)
+    return Command(0.5, 0.1, 0.0, "ok", "", estimate)

@@ -168,7 +168,7 @@ SHORT_STEPS = 20_000
 
 @pytest.fixture(scope="module")
 def short_run():
-    episodes = fuzz.plan(SHORT_STEPS, 0, list(CONTROLLERS), list(PROFILES))
+    episodes = fuzz.plan(SHORT_STEPS, 0, list(CONTROLLERS), list(fuzz.FUZZ_PROFILES))
     drawn = [fuzz.draw(*e) for e in episodes]
     counts = run_many([spec for _, spec in drawn],
                       summarize=WithSpec(partial(fuzz.spec_counts, params=Params())))
@@ -180,7 +180,7 @@ def test_short_fuzz_covers_every_pair_and_stays_finite(short_run):
     total = fuzz.totals(counts)
     assert total["steps"] >= SHORT_STEPS
     assert {(c.controller, c.sensing) for c in cases} == \
-        {(c, s) for c in CONTROLLERS for s in PROFILES}
+        {(c, s) for c in CONTROLLERS for s in fuzz.FUZZ_PROFILES}
     assert total["nonfinite_steps"] == 0
 
 

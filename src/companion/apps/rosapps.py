@@ -112,7 +112,12 @@ def _node(config, staged: Path | None, limit: float | None, domain_source: str) 
                       f"out; parameters at {node.name}/get_parameters ...")
         with stop_on_signals() as stop:
             ticks = spin(node, stop, limit)
-        node.log.info(f"stopped after {ticks} periods; sent a zero velocity")
+        meter = node.stack.delays
+        measured = ", ".join(f"{name} {value:.3f} s" for name, value in (
+            ("detection latency", meter.latency), ("actuator lag", meter.tau))
+            if value is not None) or "nothing yet"
+        node.log.info(f"stopped after {ticks} periods; sent a zero velocity; measured "
+                      f"delays: {measured}")
         node.log.removeHandler(terminal)
     finally:
         if node is not None:

@@ -6,13 +6,17 @@ The safety supervisor applies them to the controller's target in this order (doc
    ``dD/dt >= -barrier_rate (D - D_min)``; the approach speed shrinks to 0 at
    ``keepout.person_clearance`` (robot centre to person) and ``keepout.obstacle_clearance``
    (footprint to surface). 0 switches a barrier off.
-2. **Evasive check** (:func:`evasive_target`): when the robot and the person close in, the next
-   ``keepout.evasive_horizon_s`` are predicted (the robot through its actuator lag, the person
-   along its estimated heading and ``keepout.heading_sigmas`` standard deviations to either
-   side) and a command that would come within 5 cm of the protective distance or of an
-   obstacle is replaced by the closest safe one of a grid.
+2. **Evasive check** (:func:`evasive_target`): when the robot and the person close in and the
+   controller's command has a collision risk (:func:`risk_of`, :mod:`.risk`) of at least
+   ``keepout.collision_risk``, the next ``keepout.evasive_horizon_s`` are predicted (the
+   robot through its actuator lag, the person along its estimated heading and
+   ``keepout.heading_sigmas`` standard deviations to either side) and a command that would
+   come within 5 cm of the protective distance or of an obstacle is replaced by the closest
+   safe one of a grid.
 3. **Braking bound** (:func:`braking_bound`): inside ``protective_distance`` the robot may only
-   turn or move away; outside it, and towards obstacles, the robot's own approach speed is
+   turn or move away (at least as fast as the person comes); where only the person's
+   uncertainty reaches the zone, the robot may not approach but need not flee; outside, and
+   towards obstacles, the robot's own approach speed is
    what braking at the rate limit can still stop in time, counting one period of delay and
    the distance the actuator lag carries the robot on at its measured speed. A person's own
    approach outside the zone is rule 2's to answer: backing off along the line to the person
@@ -39,11 +43,11 @@ from typing import NamedTuple
 import numpy as np
 
 from companion._jit import jitable, kernel
+from companion.control.risk import compiled_command_risk, robot_path
 from companion.control.stopping import stop_path_target
 from companion.geometry import (
     ObstacleArrays,
     clearance,
-    lagged,
     major_std,
     min_clearance,
     obstacle_arrays,
@@ -185,9 +189,12 @@ def person_interval(robot: Pose, person: PersonState, params: Params, reasons: l
         return 0.0, 0.0
     nx, ny, dist, approach = normal
     gap = dist - k.protective_distance - grow
-    if gap <= 0.0:
+    if dist <= k.protective_distance:     # inside the zone itself: away, as fast as it comes
         reasons.append("protective_zone")
         return speed_bound(robot.theta, nx, ny, max(approach, 0.0), 0.0)
+    if gap <= 0.0:            # only the person's uncertainty reaches: no approach of its own
+        reasons.append("protective_zone")
+        return speed_bound(robot.theta, nx, ny, 0.0, 0.0)
     rate = min(s.accel_max, s.decel_max)
     net = max(rate - k.person_accel, 0.1 * rate)   # the person may speed up
     tau = params.sensing.actuator_tau_s
@@ -298,19 +305,14 @@ def rollout_margins(x0: float, y0: float, th0: float, v0: float, w0: float,
             hy[j, k] = qy + extra * math.sin(heading)
     out = np.empty(targets.shape[0])
     for i in range(targets.shape[0]):
-        x, y, th = x0, y0, th0
-        va, wa = v0, w0
+        xs, ys = robot_path(x0, y0, th0, v0, w0, targets[i, 0], targets[i, 1], spec.v_rate,
+                            spec.w_rate, spec.lag, spec.step, n)
         margin = math.inf
         for k in range(n):
-            t = (k + 1) * spec.step
-            v = v0 + min(max(targets[i, 0] - v0, -spec.v_rate * t), spec.v_rate * t)
-            w = w0 + min(max(targets[i, 1] - w0, -spec.w_rate * t), spec.w_rate * t)
-            va = lagged(va, v, spec.lag, spec.step)[0]
-            wa = lagged(wa, w, spec.lag, spec.step)[0]
-            x, y, th = unicycle_step(x, y, th, va, wa, spec.step)
-            margin = min(margin, min_clearance(x, y, obstacles, spec.radius))
+            margin = min(margin, min_clearance(xs[k], ys[k], obstacles, spec.radius))
             for j in range(m):
-                margin = min(margin, math.hypot(x - hx[j, k], y - hy[j, k]) - spec.protective)
+                margin = min(margin, math.hypot(xs[k] - hx[j, k], ys[k] - hy[j, k])
+                             - spec.protective)
         out[i] = margin
     return out
 
@@ -348,6 +350,21 @@ def evasive_target(robot: Pose, current: tuple[float, float], nominal: tuple[flo
     return float(targets[best, 0]), float(targets[best, 1])
 
 
+def risk_of(command: tuple[float, float], robot: Pose, v_now: tuple[float, float],
+            estimate: PersonEstimate, params: Params) -> float:
+    """The collision risk of ``command`` over the evasive horizon
+    (:func:`companion.control.risk.collision_risk`): the robot from its velocity ``v_now``,
+    the person as ``estimate`` says, contact at the footprint plus ``keepout.person_radius``."""
+    r, s, k, h = params.robot, params.supervisor, params.keepout, estimate.state
+    step = 0.1
+    return compiled_command_risk(
+        robot.x, robot.y, robot.theta, float(v_now[0]), float(v_now[1]), float(command[0]),
+        float(command[1]), min(s.accel_max, s.decel_max), s.angular_accel_max,
+        params.sensing.actuator_tau_s, step, int(round(k.evasive_horizon_s / step)), h.x, h.y,
+        h.theta, h.v, h.omega, np.ascontiguousarray(estimate.covariance, dtype=float),
+        params.tracker.accel_std, r.radius + k.person_radius)
+
+
 def keep_out(target: tuple[float, float, float], robot: Pose, estimate: PersonEstimate,
              obstacles: Sequence[Obstacle], v_now: tuple[float, float], params: Params,
              reasons: list[str], prev: tuple[float, float] | None = None
@@ -360,7 +377,9 @@ def keep_out(target: tuple[float, float, float], robot: Pose, estimate: PersonEs
     person = estimate.state
     grow = params.keepout.uncertainty_sigmas * reaction_std(estimate, reaction_delay(params))
     v = barrier_speed(v, robot, person, obstacles, params)
-    if closing(robot, person, v_now[0], params, grow):
+    threshold = params.keepout.collision_risk
+    if closing(robot, person, v_now[0], params, grow) and (
+            threshold <= 0.0 or risk_of((v, w), robot, v_now, estimate, params) >= threshold):
         spread = params.keepout.heading_sigmas * heading_std(estimate)
         evade = evasive_target(robot, v_now, (v, w), person, obstacles, params, grow, spread,
                                horizon=params.keepout.evasive_horizon_s)

@@ -11,12 +11,15 @@ and the person estimate. Per call:
    one place that decides whether the person is seen, predicted or lost;
 3. robot pose, obstacles and scan (:mod:`companion.control.checks`);
 4. the wrapped controller, on a checked observation predicted to the moment its command takes
-   effect (``sensing.actuator_tau_s`` on), the same for every controller;
+   effect (the actuator lag on), the same for every controller;
 5. keep-out rules, with the protective distance grown by the person's uncertainty, the last
    of them checking the command as the rate limits will send it against the last command
    (:func:`companion.control.keepout.keep_out`);
 6. rate and velocity limits (:func:`companion.control.limits.limit`); a stopped robot's target
    is zero, so it brakes at the limits.
+
+Steps 4 and 5 use the detection latency and actuator lag measured by
+:class:`~companion.control.delays.DelayMeter` (``supervisor.delays``), not the declared ones.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from collections import deque
 
 from companion.control import checks
 from companion.control.base import Controller, saturate
+from companion.control.delays import DelayMeter
 from companion.control.keepout import keep_out
 from companion.control.limits import limit
 from companion.control.slot import reference_point, slot_point
@@ -50,6 +54,7 @@ class SafetySupervisor:
         self._clock = checks.Clock(params.dt, params.supervisor.max_step_ratio)
         self._odometry = checks.Odometry(params.robot)
         self._tracker = PersonTracker(params.tracker)
+        self.delays = DelayMeter(params)
         self.reset()
 
     def reset(self) -> None:
@@ -61,6 +66,7 @@ class SafetySupervisor:
         self._clock.reset()
         self._odometry.reset()
         self._tracker.reset()
+        self.delays.reset()
         self._sensor_t = 0.0          # the sensor clock: the last valid time, periods counted on
         self._poses: deque[tuple[float, Pose]] = deque()   # for robot-frame detections
         self._far_since: float | None = None               # the slot error is large since
@@ -78,6 +84,7 @@ class SafetySupervisor:
             self._sensor_t = obs.t
             self._remember(obs.t, obs.robot)
             self._tracker.add(self._detections(obs), obs.t, self._pose_at, reasons)
+            self.delays.detections(obs.detections, obs.t)
             self._inner_fresh |= self._tracker.reacquired
         else:
             self._sensor_t += p.dt
@@ -101,8 +108,12 @@ class SafetySupervisor:
         if not stop and self._odometry_bad_since is not None \
                 and self._sensor_t - self._odometry_bad_since > p.supervisor.odometry_timeout_s:
             stop = "odometry_lost"
+        if fresh:
+            self.delays.motion(obs.t if obs.robot_stamp is None else obs.robot_stamp,
+                               velocity if measured else None)
         if measured and not self._started:   # rate limits start from the measured velocity
             self._prev, self._started = saturate(*velocity, self.params.robot), True
+        run = self.delays.params(p) if p.supervisor.delays == "measured" else p
 
         stepped = False
         target = (*self._prev, 0.0)
@@ -112,7 +123,8 @@ class SafetySupervisor:
             if self._inner_fresh:
                 self.inner.reset()
                 self._inner_fresh = False
-            cmd = self.inner.step(self._ahead(obs, estimate, obstacles, scan, velocity))
+            cmd = self.inner.step(self._ahead(obs, estimate, obstacles, scan, velocity,
+                                              run.sensing.actuator_tau_s))
             if checks.finite(cmd.v, cmd.omega, cmd.u_ob):
                 stepped, target = True, (cmd.v, cmd.omega, cmd.u_ob)
             else:
@@ -126,9 +138,11 @@ class SafetySupervisor:
             self._check_slot(obs.robot, estimate, reasons)
             if stepped:
                 requested = limit(target[:2], self._prev, p)
-            target = keep_out(target, obs.robot, estimate, obstacles, velocity, p, reasons,
+            target = keep_out(target, obs.robot, estimate, obstacles, velocity, run, reasons,
                               self._prev)
         self._prev = limit(target[:2], self._prev, p)
+        if fresh:
+            self.delays.sent(obs.t, self._prev)
         final = Command(*self._prev, target[2])
         if stepped:
             self.inner.applied(final)
@@ -197,10 +211,9 @@ class SafetySupervisor:
         return self._prev, False
 
     def _ahead(self, obs: Observation, estimate: PersonEstimate, obstacles: tuple,
-               scan: Scan | None, velocity: tuple[float, float]) -> Observation:
-        """What the controller gets: robot and person predicted ``actuator_tau_s`` on, the
-        moment a command sent now mostly takes effect."""
-        tau = self.params.sensing.actuator_tau_s
+               scan: Scan | None, velocity: tuple[float, float], tau: float) -> Observation:
+        """What the controller gets: robot and person predicted ``tau`` s on (the actuator
+        lag), the moment a command sent now mostly takes effect."""
         robot, person = obs.robot, estimate.walker
         if tau > 0.0:
             x, y, th = unicycle_step(robot.x, robot.y, robot.theta, *velocity, tau)

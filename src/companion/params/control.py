@@ -37,6 +37,11 @@ def _step_ratio(x: float) -> str | None:
     return None if 1.0 < x < math.inf else "a finite ratio > 1"
 
 
+@ranged("[0, 1)")
+def _risk(x: float) -> str | None:
+    return None if 0.0 <= x < 1.0 else "a probability in [0, 1)"
+
+
 @ranged("[0.1, 10]")
 def _horizon(x: float) -> str | None:
     return None if 0.1 <= x <= 10.0 else "a time in [0.1, 10] s"
@@ -140,6 +145,14 @@ class KeepOutParams(Validated):
                                   "walking this many standard deviations of its estimated "
                                   "heading to either side (at most pi/4); 0: only along it",
                                   non_negative)
+    collision_risk: float = param(0.0, "-", "how cautious the robot is: the evasive check "
+                                  "acts only where the chance that the person and the "
+                                  "footprint meet within evasive_horizon_s, under the "
+                                  "tracker's distribution of the person, reaches this "
+                                  "(lower: more cautious, the robot gives up its slot more "
+                                  "often; 0: whenever the worst case comes near)", _risk)
+    person_radius: float = param(0.2, "m", "radius of the person's body in the collision risk "
+                                 "(contact: the footprint's radius plus this)", non_negative)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -166,6 +179,11 @@ class SupervisorParams(Validated):
                                       "reported (degraded: odometry_invalid) and replaced by "
                                       "the last command; for longer than this the robot stops "
                                       "(stopped: odometry_lost)", positive)
+    delays: str = param("measured", "-", "which detection latency and actuator lag the "
+                        "stack compensates: 'measured' (the detections' age at arrival and the "
+                        "lag that odometry shows, within bounds; the declared ones until enough "
+                        "is seen) or 'declared' (sensing.person_latency_s and "
+                        "sensing.actuator_tau_s as given)", choices=("measured", "declared"))
 
 
 @dataclasses.dataclass(frozen=True)

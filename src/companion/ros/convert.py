@@ -14,7 +14,15 @@ import numpy as np
 
 from companion.geometry import wrap_pi
 from companion.ros.messages import make
-from companion.types import Circle, Command, PersonDetection, PersonEstimate, Pose, Scan
+from companion.types import (
+    Circle,
+    Command,
+    PersonDetection,
+    PersonEstimate,
+    PersonState,
+    Pose,
+    Scan,
+)
 
 
 class TimeBase(NamedTuple):
@@ -259,12 +267,17 @@ LEVELS = {"ok": 0, "degraded": 1, "stopped": 2}   # DiagnosticStatus OK, WARN, E
 
 def status_msg(t: float, cmd: Command, errors: tuple[float, float, float] | None,
                name: str = "companion", tb: TimeBase = ABSOLUTE,
-               warnings: Sequence[str] = ()) -> Any:
+               warnings: Sequence[str] = (),
+               delays: tuple[float | None, float | None] = (None, None)) -> Any:
     """diagnostic_msgs/DiagnosticArray: the supervisor's status (OK, WARN for degraded, ERROR
     for stopped) and reason, the command, the relative state ``(rho, alpha, beta)`` to the
-    person estimate and the estimate itself, as key-value pairs (SI units); the node's active
+    person estimate and the estimate itself, the measured detection latency and actuator lag
+    (``delays``, s; absent until measured), as key-value pairs (SI units); the node's active
     ``warnings`` (a problem on its inputs) as ``warning`` and the message."""
     values = {"status": cmd.status, "reason": cmd.reason, "v": cmd.v, "omega": cmd.omega}
+    for key, value in zip(("latency_measured_s", "actuator_tau_measured_s"), delays):
+        if value is not None:
+            values[key] = value
     if errors is not None:
         values.update(zip(("rho", "alpha", "beta"), errors))
     e = cmd.estimate
@@ -294,6 +307,22 @@ def status_of(msg: Any) -> tuple[str, str]:
     status = values.get("status", names.get(int(first.level), "degraded"))
     reason = values.get("reason", "" if status == "ok" else first.message)
     return (status, reason) if status in LEVELS else ("degraded", reason)
+
+
+def estimate_of(msg: Any) -> PersonEstimate | None:
+    """The person estimate a :func:`status_msg` carries (its state; the covariance is not
+    sent, so it is 0, and the formation's person is the state), or None without one."""
+    if not msg.status:
+        return None
+    values = {kv.key: kv.value for kv in msg.status[0].values}
+    keys = ("person_x", "person_y", "person_theta", "person_v", "person_omega", "person_std")
+    try:
+        x, y, theta, v, omega, std = (float(values[k]) for k in keys)
+    except (KeyError, ValueError):
+        return None
+    state = PersonState(x, y, theta, v, omega)
+    return PersonEstimate(state, std, np.zeros((5, 5)), 0.0,
+                          values.get("person_track", "seen"), state)
 
 
 _COLORS = {"person": (0.1, 0.4, 1.0, 0.9), "slot": (0.1, 0.8, 0.2, 0.8),

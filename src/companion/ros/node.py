@@ -283,7 +283,7 @@ class CompanionNode:
         if r.topics.scan and now - self._scan_t > r.scan_timeout_s:
             stale.append("scan")
         obs = Observation(now, robot, None, self._obstacles, self._scan_seen, velocity,
-                          tuple(detections), tuple(stale))
+                          tuple(detections), tuple(stale), None if odom is None else odom.t)
         with self._step_lock:
             cmd = self.stack.step(obs)
         if future:
@@ -379,7 +379,10 @@ class CompanionNode:
             errors = relative_state(robot.x, robot.y, robot.theta, w.x, w.y, w.theta,
                                     p.robot.d)
             slot = slot_point(w, p)
-        self._status(convert.status_msg(now, cmd, errors, r.node_name, tb, self.warnings))
+        meter = getattr(self.stack, "delays", None)
+        delays = (None, None) if meter is None else (meter.latency, meter.tau)
+        self._status(convert.status_msg(now, cmd, errors, r.node_name, tb, self.warnings,
+                                        delays))
         reach = tuple((ob, influence_range(ob, p.avoidance)) for ob in self._obstacles)
         self.view = View(now, robot, e, slot, reach)
         if self._markers is not None:

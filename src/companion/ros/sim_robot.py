@@ -30,7 +30,7 @@ from companion.ros.transport import DEFAULT, SENSOR_DATA, Qos, Transport
 from companion.sim.episode import run_episode, timed_out
 from companion.sim.runner import EpisodeSpec
 from companion.sim.sensing import LidarPerception
-from companion.types import Command, Log, Observation
+from companion.types import Command, Log, Observation, PersonEstimate
 
 #: Where simulated time starts on the wire: 2000-01-01T00:00:00Z, in ns since 1970. Stamps,
 #: /clock and a bag's log times of a simulated run count from it (a bag of a simulated run
@@ -96,6 +96,7 @@ class WireRobot:
         self._lock = threading.Condition()
         self._received: tuple[float, float] | None = None
         self._status = ("ok", "")        # the node's last word on /companion/status
+        self._estimate: PersonEstimate | None = None   # and its person estimate
         self.commands = 0
         transport.subscribe(t.cmd_vel, cmd_type, self._on_cmd, DEFAULT)
         if t.status:
@@ -112,9 +113,9 @@ class WireRobot:
                 self._lock.notify_all()
 
     def _on_status(self, msg: Any) -> None:
-        status = convert.status_of(msg)
+        status, estimate = convert.status_of(msg), convert.estimate_of(msg)
         with self._lock:
-            self._status = status
+            self._status, self._estimate = status, estimate
 
     def wait_for_node(self, timeout: float) -> bool:
         """Wait up to ``timeout`` s for a first /cmd_vel (with ``use_sim_time``, /clock stays
@@ -174,13 +175,13 @@ class WireRobot:
                 self._lock.wait_for(lambda: self.commands >= due or self.pacer.stop.is_set(),
                                     self.lockstep_s)
             received, self._received = self._received, None
-            status = self._status
+            status, estimate = self._status, self._estimate
         if received is not None:
             self._base, self._last_cmd_t = received, obs.t
         elif obs.t - self._last_cmd_t >= self.params.robot.command_timeout_s - 1e-9:
             self._base = timed_out(self._base, self.params)
             status = ("stopped", "command_timeout")
-        return Command(*self._base, 0.0, *status)
+        return Command(*self._base, 0.0, *status, estimate)
 
 
 def run_sim_robot(spec: EpisodeSpec, transport: Transport, ros: RosParams, pacer: Pacer,
