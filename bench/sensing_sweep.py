@@ -91,20 +91,25 @@ def row(controller: str, label: str, runs: list[dict]) -> list:
 
 
 def figure(rows: list[list], path: Path) -> None:
-    fig, ax = plt.subplots(figsize=(7.5, 6.0))
-    top = max(max(r[3], r[5]) for r in rows) * 1.15
-    ax.plot([0, top], [0, top], color="0.6", lw=1, label="slot error = floor")
-    ax.plot([0, top], [0, 1.6 * top], color="0.6", lw=1, ls="--", label="1.6 x floor")
+    """Median slot error against the floor per cell, log-log, with the 1x and 1.6x lines;
+    the default LQR's cells labelled."""
+    fig, ax = plt.subplots(figsize=(8.0, 6.5))
+    lo = 0.5 * min(min(r[3], r[5]) for r in rows)
+    hi = 2.0 * max(max(r[3], r[5]) for r in rows)
+    ax.plot([lo, hi], [lo, hi], color="0.6", lw=1, label="slot error = floor")
+    ax.plot([lo, hi], [1.6 * lo, 1.6 * hi], color="0.6", lw=1, ls="--", label="1.6 x floor")
     for name, marker in zip(dict.fromkeys(r[0] for r in rows), "osD^v<>"):
         mine = [r for r in rows if r[0] == name]
-        ax.scatter([r[5] for r in mine], [r[3] for r in mine], marker=marker,
-                   label=name)
+        ax.scatter([r[5] for r in mine], [r[3] for r in mine], marker=marker, label=name,
+                   s=36 if name == "lqr" else 22, zorder=3)
         if name == "lqr":
             for r in mine:
-                ax.annotate(r[1], (r[5], r[3]), fontsize=7, xytext=(3, 3),
+                ax.annotate(r[1], (r[5], r[3]), fontsize=7, xytext=(4, -3),
                             textcoords="offset points")
-    ax.set_xlim(0, top)
-    ax.set_ylim(0, 1.7 * top)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(lo, hi)
     ax.set_xlabel("floor: median RMS error of the slot the estimate implies (m)")
     ax.set_ylabel("median RMS slot error (m)")
     ax.set_title("Slot error against its floor, per detector (ETH/UCY tracks)")
@@ -113,12 +118,27 @@ def figure(rows: list[list], path: Path) -> None:
     plt.close(fig)
 
 
+def plot_csv(csv_path: Path, path: Path) -> None:
+    """The figure again from a written sweep.csv."""
+    import csv
+
+    with open(csv_path, newline="") as fh:
+        rows = [[r[0], r[1], int(r[2]), *map(float, r[3:])] for r in list(csv.reader(fh))[1:]]
+    figure(rows, path)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--every", type=int, default=1, help="take every N-th track (1)")
     ap.add_argument("--out", type=Path, default=Path("out") / "sensing_sweep")
     ap.add_argument("--workers", type=int, default=None)
+    ap.add_argument("--plot", type=Path, metavar="CSV", help="only draw sweep.png again from "
+                    "a sweep.csv (into --out)")
     args = ap.parse_args()
+    if args.plot:
+        args.out.mkdir(parents=True, exist_ok=True)
+        plot_csv(args.plot, args.out / "sweep.png")
+        return
     tracks = pedestrians.select_tracks(pedestrians.load_scenes())[::args.every]
     plan = cells()
     print(f"{len(plan)} cells x {len(tracks)} tracks x 2 sides")

@@ -234,7 +234,8 @@ def _ros_commands(sub) -> None:
                     "section: topics, frames, transport)")
     sr.add_argument("--person-type", choices=("point", "pose", "pose_array", "odometry"),
                     help="message type of the person detections (default: the parameters' "
-                         "ros.person_type, point if auto)")
+                         "ros.person_type; auto: what the sensing measures, odometry with a "
+                         "speed, pose with a heading, else point)")
     sr.add_argument("--rate", metavar="X", help=f"real-time factor, {rng('--rate', 'X')}; "
                     "other than 1 publishes /clock (use_sim_time) (default 1)")
     sr.add_argument("--lockstep", action="store_true", help="lock step with the node: "

@@ -83,7 +83,7 @@ class WireRobot:
         self._tf = transport.publisher("/tf", "tf2_msgs/msg/TFMessage", Qos(depth=100))
         self._scan = transport.publisher(t.scan, "sensor_msgs/msg/LaserScan", SENSOR_DATA) \
             if t.scan else None
-        kind = "point" if ros.person_type == "auto" else ros.person_type   # a robot sends one
+        kind = measured_type(params) if ros.person_type == "auto" else ros.person_type
         self.person_type = kind
         self._person = transport.publisher(t.person, convert.PERSON_TYPES[kind], DEFAULT)
         # /clock reliable (readers may be best effort): on Zenoh the reliable and the
@@ -182,6 +182,16 @@ class WireRobot:
             self._base = timed_out(self._base, self.params)
             status = ("stopped", "command_timeout")
         return Command(*self._base, 0.0, *status, estimate)
+
+
+def measured_type(params) -> str:
+    """The person message that carries what the sensing profile measures (``ros.person_type``
+    auto): Odometry with a speed and turn rate, PoseStamped with a heading, else
+    PointStamped; a message that carries less drops what the sensor knows."""
+    s = params.sensing
+    if s.person_velocity_noise is not None:
+        return "odometry"
+    return "pose" if s.person_heading_noise_rad is not None else "point"
 
 
 def run_sim_robot(spec: EpisodeSpec, transport: Transport, ros: RosParams, pacer: Pacer,
