@@ -239,8 +239,13 @@ def test_bench_json_has_the_documented_keys(tmp_path, capsys):
     assert set(result["step_us"]) == {"lqr", "lqr-paper", "lqr-tuned", "pid", "vsm", "ic",
                                       "lqr with scipy"}
     for name, figures in result["step_us"].items():
-        for where in ("alone", "stack") if name != "lqr with scipy" else ("alone",):
+        wheres = ("alone", "stack", "stack_realistic") if name != "lqr with scipy" else ("alone",)
+        for where in wheres:
             assert 0.0 < figures[where]["median"] <= figures[where]["p99"]
+    dare = result["dare_us"]
+    assert 0.0 < dare["median"] <= dare["p99"]
+    assert result["stack_per_dare"]["lqr"]["stack_realistic"] == pytest.approx(
+        result["step_us"]["lqr"]["stack_realistic"]["median"] / dare["median"])
     # scipy's Riccati solver is much slower than the compiled one, even on a busy machine
     assert (result["step_us"]["lqr with scipy"]["alone"]["median"]
             > 5.0 * result["step_us"]["lqr"]["alone"]["median"])

@@ -59,9 +59,19 @@ def summary_lines(m: dict) -> list[str]:
         f"  settling time {'never' if settle is None else f'{settle:.2f} s'}",
         f"  supervisor: ok {m['share_ok']:.1%}, degraded {m['share_degraded']:.1%}, "
         f"stopped {m['share_stopped']:.1%} of the time (reasons in log.csv)",
-    ] + ([] if m.get("min_obstacle_clearance_m") is None else [
+    ] + split_lines(m) + ([] if m.get("min_obstacle_clearance_m") is None else [
         f"  min obstacle clearance {m['min_obstacle_clearance_m']:.3f} m, "
         f"collisions {m['obstacle_collisions']}"])
+
+
+def split_lines(m: dict) -> list[str]:
+    """Where the slot error comes from (docs/sensing.md), when the run had an estimate."""
+    if m.get("rms_estimate_error_m") is None:
+        return []
+    return [f"  slot error {m['rms_slot_error_m']:.4f} m RMS: the estimate's own "
+            f"{m['rms_estimate_error_m']:.4f} m, tracking the estimated slot "
+            f"{m['rms_tracking_error_m']:.4f} m; the keep-out moved the robot "
+            f"{m['safety_shift_m']:.3f} m in all, on {m['safety_share']:.1%} of the steps"]
 
 
 tqdm.monitor_interval = 0   # no monitor thread: the runner forks worker processes
