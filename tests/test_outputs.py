@@ -151,9 +151,12 @@ def test_a_kill_at_any_step_of_the_switch_leaves_one_whole_set(tmp_path):
 
 
 def _start(out, duration="36000"):
+    # SIGINT at its default in the child: a suite started in the background (a shell's
+    # asynchronous job) hands its children SIGINT ignored, and Python keeps it so
     return subprocess.Popen([sys.executable, "-m", "companion.apps.cli", "run", "line",
                              "--duration", duration, "--out", str(out)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
 def _wait_until_running(proc, timeout=60.0):
@@ -164,10 +167,7 @@ def _wait_until_running(proc, timeout=60.0):
         with open(f"/proc/{proc.pid}/status") as fh:
             caught = next(int(line.split()[1], 16) for line in fh if line.startswith("SigCgt"))
         if caught >> (signal.SIGTERM - 1) & 1:
-            # well into the simulation, past the first step's loading (or compiling) of the
-            # numba kernels: a SIGINT then was lost twice in full-suite runs (not diagnosed;
-            # docs/safety.md, "Choices and limits")
-            time.sleep(3.0)
+            time.sleep(0.5)               # well into the simulation
             return
         assert time.monotonic() < end, "the run never started"
         time.sleep(0.05)
