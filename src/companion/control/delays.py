@@ -79,8 +79,8 @@ class DelayMeter:
         if last is None:
             return
         (t0, v0), dt = last, stamp - last[0]
-        if dt > 2.0 * self.declared.dt:
-            return
+        if not 0.5 * self.declared.dt <= dt <= 1.5 * self.declared.dt:
+            return      # a sample missed: two commands acted in between
         before = [u for t, u in self._sent if t <= t0 + 1e-9]
         if not before:
             return
