@@ -81,11 +81,11 @@ class DelayMeter:
         (t0, v0), dt = last, stamp - last[0]
         if not 0.5 * self.declared.dt <= dt <= 1.5 * self.declared.dt:
             return      # a sample missed: two commands acted in between
-        before = [u for t, u in self._sent if t <= t0 + 1e-9]
-        if not before:
+        command = next((u for t, u in reversed(self._sent) if t <= t0 + 1e-9), None)
+        if command is None:
             return
         forget = math.exp(-dt / MEMORY_S)
-        for u, a0, a1, gap in zip(before[-1], v0, velocity, MIN_GAP):
+        for u, a0, a1, gap in zip(command, v0, velocity, MIN_GAP):
             x, y = u - a0, u - a1
             if abs(x) < gap:
                 continue

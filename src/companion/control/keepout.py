@@ -61,6 +61,8 @@ from companion.types import Circle, Obstacle, PersonEstimate, PersonState, Pose
 BRISK_WALK = 1.5
 #: Distance band (m) beyond the protective distance within which the evasive check always runs.
 EVASIVE_BAND = 0.3
+#: Time step (s) of the evasive check's and the collision risk's predictions.
+ROLLOUT_STEP = 0.1
 #: Candidate targets of the evasive check: 7 x 5 fractions of (v_max, omega_max).
 _GRID = np.array([(v, w) for v in np.linspace(-1.0, 1.0, 7) for w in np.linspace(-1.0, 1.0, 5)])
 
@@ -323,7 +325,7 @@ _rollout_margins = kernel(rollout_margins)
 def evasive_target(robot: Pose, current: tuple[float, float], nominal: tuple[float, float],
                    person: PersonState, obstacles: Sequence[Obstacle], params: Params,
                    grow: float = 0.0, spread: float = 0.0, needed: float = 0.05,
-                   comfort: float = 0.2, horizon: float = 1.2, step: float = 0.1
+                   comfort: float = 0.2, horizon: float = 1.2, step: float = ROLLOUT_STEP
                    ) -> tuple[float, float] | None:
     """Rule 2: a replacement for the ``nominal`` target if its predicted margin (to the
     protective distance grown by ``grow`` m, for the person's headings ``spread`` rad to
@@ -356,7 +358,7 @@ def risk_of(command: tuple[float, float], robot: Pose, v_now: tuple[float, float
     (:func:`companion.control.risk.collision_risk`): the robot from its velocity ``v_now``,
     the person as ``estimate`` says, contact at the footprint plus ``keepout.person_radius``."""
     r, s, k, h = params.robot, params.supervisor, params.keepout, estimate.state
-    step = 0.1
+    step = ROLLOUT_STEP
     return compiled_command_risk(
         robot.x, robot.y, robot.theta, float(v_now[0]), float(v_now[1]), float(command[0]),
         float(command[1]), min(s.accel_max, s.decel_max), s.angular_accel_max,

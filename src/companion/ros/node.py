@@ -379,10 +379,9 @@ class CompanionNode:
             errors = relative_state(robot.x, robot.y, robot.theta, w.x, w.y, w.theta,
                                     p.robot.d)
             slot = slot_point(w, p)
-        meter = getattr(self.stack, "delays", None)
-        delays = (None, None) if meter is None else (meter.latency, meter.tau)
+        meter = self.stack.delays
         self._status(convert.status_msg(now, cmd, errors, r.node_name, tb, self.warnings,
-                                        delays))
+                                        (meter.latency, meter.tau)))
         reach = tuple((ob, influence_range(ob, p.avoidance)) for ob in self._obstacles)
         self.view = View(now, robot, e, slot, reach)
         if self._markers is not None:

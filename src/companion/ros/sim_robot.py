@@ -184,7 +184,7 @@ class WireRobot:
         return Command(*self._base, 0.0, *status, estimate)
 
 
-def measured_type(params) -> str:
+def measured_type(params: Params) -> str:
     """The person message that carries what the sensing profile measures (``ros.person_type``
     auto): Odometry with a speed and turn rate, PoseStamped with a heading, else
     PointStamped; a message that carries less drops what the sensor knows."""
