@@ -1,12 +1,13 @@
 """The person tracker alone: checks, gating, late detections, prediction, loss and reacquiry,
 and the filter's consistency on a noisy walk."""
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
-from companion.params import TrackerParams
+from companion.params import SensingParams, TrackerParams
 from companion.tracking import (
     PersonTracker,
     coordinated_turn,
@@ -280,3 +281,63 @@ def test_a_manoeuvre_widens_the_reported_uncertainty_but_not_the_filter():
     steady = [b.position_std / a.position_std for (t, a), (_, b) in zip(plain, wide)
               if 1.0 <= t < 3.0]
     assert 1.0 <= np.median(steady) < 1.6
+
+
+def _gently_curving(t):
+    """A walker at 1.2 m/s turning at 0.1 rad/s: what the steady model expects."""
+    return np.array((12.0 * math.sin(0.1 * t), 12.0 * (1.0 - math.cos(0.1 * t))))
+
+
+def _noisy_walk(params, noise, declared, sensing=None, seed=3, until=60.0):
+    """The tracker after 10 Hz detections of :func:`_gently_curving` with ``noise`` m of
+    noise whose covariance states ``declared`` m (None: no covariance); the NIS of the
+    second half."""
+    rng, tr, nis = np.random.default_rng(seed), PersonTracker(params, sensing), []
+    cov = None if declared is None else (declared ** 2, 0.0, 0.0, declared ** 2)
+    for t in np.arange(0.0, until, 0.1):
+        x, y = _gently_curving(t) + noise * rng.standard_normal(2)
+        tr.add([seen(t, x, y, covariance=cov)], t)
+        if t >= until / 2:
+            nis += tr.innovations
+    return tr, np.array(nis)
+
+
+def test_the_innovations_of_an_honest_detector_are_chi_square():
+    """Declared noise equal to the real one: the NIS's mean lies near its 2 degrees of
+    freedom (a gently turning walker; the process noise allows for more, so a little below)
+    and few exceed its 95 % point."""
+    _, nis = _noisy_walk(TP, 0.05, 0.05)
+    assert 1.4 < nis.mean() < 2.4
+    assert np.mean(nis > 5.99) < 0.08
+
+
+def test_a_detector_noisier_than_it_declares_is_learned_within_bounds():
+    """10 cm of noise declared as 5 cm: the fixed filter's NIS is far above 2; adapting, the
+    tracker learns a factor near the true 4 on the variance, within its bound, and the NIS
+    comes back near 2. With an honest detector the factor stays near 1."""
+    adaptive = dataclasses.replace(TP, adapt_noise_max=5.0, adapt_time_s=2.0)
+    fixed, nis_fixed = _noisy_walk(TP, 0.10, 0.05)
+    assert fixed.noise_scale == 1.0 and nis_fixed.mean() > 4.0
+    learned, nis = _noisy_walk(adaptive, 0.10, 0.05)
+    assert 2.5 < learned.noise_scale <= 5.0
+    assert 1.4 < nis.mean() < 2.8
+    capped, _ = _noisy_walk(dataclasses.replace(adaptive, adapt_noise_max=2.0), 0.10, 0.05)
+    assert capped.noise_scale <= 2.0
+    honest, _ = _noisy_walk(adaptive, 0.05, 0.05)
+    assert 1.0 <= honest.noise_scale < 1.8
+
+
+def test_detections_without_covariance_take_the_declared_sensing_noise():
+    """A PointStamped-like detection: its noise is the sensing profile's unless the tracker
+    is given one, and the NIS is honest with it."""
+    noisy = SensingParams(person_position_noise_m=0.2)
+    assert PersonTracker(TP, noisy).params.position_std_m == 0.2
+    assert PersonTracker(TrackerParams(position_std_m=0.07), noisy).params.position_std_m \
+        == 0.07
+    assert PersonTracker(TP, SensingParams(person_position_noise_m=0.2,
+                                           person_declared_noise_m=0.1)
+                         ).params.position_std_m == 0.1
+    assert PersonTracker(TP, SensingParams(person_heading_noise_rad=0.02)
+                         ).params.heading_std_rad == 0.02
+    _, nis = _noisy_walk(TP, 0.10, None, SensingParams(person_position_noise_m=0.10))
+    assert 1.4 < nis.mean() < 2.4

@@ -53,7 +53,7 @@ class SafetySupervisor:
         self.params = params
         self._clock = checks.Clock(params.dt, params.supervisor.max_step_ratio)
         self._odometry = checks.Odometry(params.robot)
-        self._tracker = PersonTracker(params.tracker)
+        self._tracker = PersonTracker(params.tracker, params.sensing)
         self.delays = DelayMeter(params)
         self.reset()
 

@@ -8,6 +8,7 @@ import math
 
 from companion.config import (
     Validated,
+    at_least,
     at_least_one,
     non_negative,
     param,
@@ -53,6 +54,10 @@ class SensingParams(Validated):
                                   "every control step", positive_or_inf)
     person_position_noise_m: float = param(0.05, "m", "standard deviation of the Gaussian "
                                            "noise on each detected coordinate", non_negative)
+    person_declared_noise_m: float | None = param(None, "m", "the standard deviation the "
+                                                  "detections' covariance states; absent: "
+                                                  "person_position_noise_m (an honest "
+                                                  "detector)", non_negative)
     person_heading_noise_rad: float | None = param(None, "rad", "standard deviation of the "
                                                    "noise on a detected heading; absent: no "
                                                    "heading is measured", non_negative)
@@ -68,6 +73,12 @@ class SensingParams(Validated):
                                   non_negative)
     lidar_rate_hz: float = param(10.0, "Hz", "LiDAR scans per second (held between scans)",
                                  positive)
+
+    @property
+    def declared_noise_m(self) -> float:
+        """The position noise the detector declares (m)."""
+        declared = self.person_declared_noise_m
+        return self.person_position_noise_m if declared is None else declared
 
 
 #: Today's simulation: the exact person state at every control step, no lag.
@@ -97,10 +108,23 @@ class TrackerParams(Validated):
                              "in it are taken as they are")
     robot_frame: str = param("robot", "-", "name of the robot's own frame; detections in it "
                              "are moved to the world frame with the robot pose at their time")
-    position_std_m: float = param(0.05, "m", "standard deviation of a detected coordinate "
-                                  "when the detection gives no covariance", positive)
-    heading_std_rad: float = param(0.1, "rad", "standard deviation of a detected heading when "
-                                   "the detection gives none", positive)
+    position_std_m: float | None = param(None, "m", "standard deviation of a detected "
+                                         "coordinate when the detection gives no covariance; "
+                                         "absent: the noise the sensing declares "
+                                         "(person_declared_noise_m, else "
+                                         "person_position_noise_m; at least 1 mm)", positive)
+    heading_std_rad: float | None = param(None, "rad", "standard deviation of a detected "
+                                          "heading when the detection gives none; absent: the "
+                                          "declared sensing's person_heading_noise_rad, or "
+                                          "0.1 where it declares none", positive)
+    adapt_noise_max: float = param(1.0, "-", "the tracker scales the detections' position "
+                                   "variance by a factor it learns from their innovations "
+                                   "(how far they fall from the prediction), kept in [1, this]: "
+                                   "a detector noisier than it declares (5 with adapt_time_s "
+                                   "2 measured in docs/sensing.md); 1: the declared variance",
+                                   at_least(1.0, ""))
+    adapt_time_s: float = param(2.0, "s", "time constant of the innovation average that sets "
+                                "that factor", positive)
     accel_std: float = param(0.3, "m/s^2", "steady walk model: white acceleration in x and "
                              "y (how fast a walker changes velocity)", positive)
     turn_accel_std: float = param(1.6, "rad/s^2", "steady walk model: white acceleration of "
@@ -173,6 +197,17 @@ class TrackerParams(Validated):
         if self.lost_after_s < self.coast_after_s:
             raise ConfigError(f"lost_after_s: expected at least coast_after_s "
                               f"({self.coast_after_s:g} s), got {self.lost_after_s:g}")
+
+    def for_sensing(self, sensing: SensingParams) -> TrackerParams:
+        """These settings with the noise of detections that give none taken from the declared
+        ``sensing`` where they are absent."""
+        pos, heading = self.position_std_m, self.heading_std_rad
+        if pos is None:
+            pos = max(sensing.declared_noise_m, 1e-3)
+        if heading is None:
+            declared = sensing.person_heading_noise_rad
+            heading = declared if declared else 0.1
+        return dataclasses.replace(self, position_std_m=pos, heading_std_rad=heading)
 
 
 @dataclasses.dataclass(frozen=True)

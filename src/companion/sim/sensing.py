@@ -47,9 +47,9 @@ class PersonSensor:
         pos = s.person_position_noise_m
         stds = (0.1 if s.person_heading_noise_rad is None else s.person_heading_noise_rad,
                 0.1 if s.person_velocity_noise is None else s.person_velocity_noise)
-        e = self.rng.normal(size=5)
+        e, var = self.rng.normal(size=5), s.declared_noise_m ** 2
         return PersonDetection(t, h.x + pos * e[0], h.y + pos * e[1], self.frame,
-                               (pos * pos, 0.0, 0.0, pos * pos), h.theta + stds[0] * e[2],
+                               (var, 0.0, 0.0, var), h.theta + stds[0] * e[2],
                                stds[0], h.v + stds[1] * e[3], h.omega + stds[1] * e[4],
                                (stds[1], stds[1]))
 
@@ -82,8 +82,9 @@ class PersonSensor:
             w = s.person_velocity_noise
             ev = self.rng.normal(size=2) if w else (0.0, 0.0)
             speed, turn, velocity_std = h.v + w * ev[0], h.omega + w * ev[1], (w, w)
+        var = s.declared_noise_m ** 2
         return PersonDetection(ts, h.x + pos * e[0], h.y + pos * e[1], self.frame,
-                               (pos * pos, 0.0, 0.0, pos * pos), heading, heading_std, speed,
+                               (var, 0.0, 0.0, var), heading, heading_std, speed,
                                turn, velocity_std)
 
 

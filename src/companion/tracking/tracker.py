@@ -5,9 +5,12 @@ Mahalanobis distance of their position (another person, or an identity switch, f
 outside), and merged in time order into the walker filter (:mod:`.walker`): a late
 detection re-filters the detections after it. Between detections the track is predicted;
 after ``lost_after_s`` s without one, or when its position grows too uncertain, the person is
-lost, and a new track needs ``reacquire_time_s`` s of consistent detections. While detections
-fall farther from the prediction than the filter expects (a manoeuvre its models did not
-foresee), the reported position covariance is widened to match. An exact full-state detection
+lost, and a new track needs ``reacquire_time_s`` s of consistent detections. Detections that
+give no covariance take the declared sensing's noise; the position variance is then scaled,
+within bounds, by how far the detections fall from the prediction on average (a detector
+noisier or quieter than it declares). While detections fall farther from the prediction than
+the filter expects (a manoeuvre its models did not foresee), the reported position covariance
+is widened to match. An exact full-state detection
 (all stds 0, an ideal sensor) sets the state exactly. docs/sensing.md explains the choices.
 """
 
@@ -21,10 +24,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.geometry import major_std, wrap_pi
-from companion.params import TrackerParams
+from companion.params import SensingParams, TrackerParams
 from companion.tracking.walker import (
     Belief,
     WalkerFilter,
+    position_cov,
     position_nis,
     predict,
     widened,
@@ -52,16 +56,21 @@ class _Posterior:
     t: float
     detection: PersonDetection
     belief: Belief
-    inflation: float = 1.0   # the widening of the reported position covariance
+    inflation: float = 1.0     # the widening of the reported position covariance
+    noise_scale: float = 1.0   # the learned factor on the detections' position variance
 
 
 class PersonTracker:
     """See the module docstring. Drive it with :meth:`add` and :meth:`estimate` once per
-    control step; ``reacquired`` is True after a step that ended an outage."""
+    control step; ``reacquired`` is True after a step that ended an outage, and
+    ``innovations`` holds the position NIS of each detection the last :meth:`add` applied
+    (its squared Mahalanobis distance from the prediction: chi-square with 2 degrees of
+    freedom for an honest filter). ``sensing`` is what the detector declares (default
+    ``realistic``)."""
 
-    def __init__(self, params: TrackerParams):
-        self.params = params
-        self._filter = WalkerFilter(params)
+    def __init__(self, params: TrackerParams, sensing: SensingParams | None = None):
+        self._filter = WalkerFilter(params, sensing)
+        self.params = self._filter.params
         self.reset()
 
     def reset(self) -> None:
@@ -70,6 +79,13 @@ class PersonTracker:
         self._walking: float | None = None            # heading of the last walking estimate
         self.lost = False
         self.reacquired = False
+        self.innovations: list[float] = []
+
+    @property
+    def noise_scale(self) -> float:
+        """The factor on the detections' position variance learned so far (1 unless
+        ``adapt_noise_max`` > 1)."""
+        return self._history[-1].noise_scale if self._history else 1.0
 
     @property
     def reacquiring(self) -> bool:
@@ -85,6 +101,7 @@ class PersonTracker:
         with a detection is appended to ``reasons``."""
         reasons = [] if reasons is None else reasons
         self.reacquired = False
+        self.innovations = []
         good = [d for d in (self._checked(d, now, pose_at, reasons) for d in detections)
                 if d is not None]
         for t in sorted({d.t for d in good}):
@@ -167,7 +184,7 @@ class PersonTracker:
             if math.hypot(d.x - x[0], d.y - x[1]) \
                     > p.max_person_speed * dt + p.gate_floor_m + 3 * _std(d, p):
                 continue
-            d2 = position_nis(x, cov, d, p, floor=p.gate_floor_m)
+            d2 = position_nis(x, cov, d, p, floor=p.gate_floor_m, scale=base.noise_scale)
             if d2 <= best_d2:
                 best, best_d2 = d, d2
         return best
@@ -178,24 +195,49 @@ class PersonTracker:
 
     def _apply(self, d: PersonDetection, prior: Belief) -> None:
         """Append the posterior of the ``prior`` at ``d``'s time updated with ``d``."""
-        self._history.append(_Posterior(d.t, d, self._filter.update(prior, d),
-                                        self._inflation(prior, d)))
+        last = self._history[-1]
+        scale = last.noise_scale
+        nis = position_nis(prior.x, prior.p, d, self.params, scale=scale)
+        if math.isfinite(nis):
+            self.innovations.append(nis)
+        self._history.append(_Posterior(d.t, d, self._filter.update(prior, d, scale),
+                                        self._inflation(last, d, nis),
+                                        self._adapted(last, prior, d)))
 
-    def _inflation(self, prior: Belief, d: PersonDetection) -> float:
+    def _inflation(self, last: _Posterior, d: PersonDetection, nis: float) -> float:
         """How much wider than the filter's the reported position covariance is after ``d``:
-        ``d``'s squared Mahalanobis distance from the ``prior`` over ``inflate_nis`` if
-        that is more than the last detection's widening, decayed over the time between
-        them, else the latter (at least 1). The filter itself is not widened: its mean stays
-        as smooth as on an ordinary walk, only the keep-out rules see the doubt."""
+        ``d``'s NIS over ``inflate_nis`` if that is more than the ``last`` detection's
+        widening, decayed over the time between them, else the latter (at least 1). The
+        filter itself is not widened: its mean stays as smooth as on an ordinary walk, only
+        the keep-out rules see the doubt."""
         p = self.params
-        last = self._history[-1] if self._history else None
-        held = 1.0 if last is None else \
-            1.0 + (last.inflation - 1.0) * math.exp(-(d.t - last.t) / p.inflate_time_s)
-        nis = position_nis(prior.x, prior.p, d, p)
+        held = 1.0 + (last.inflation - 1.0) * math.exp(-(d.t - last.t) / p.inflate_time_s)
         return max(held, nis / p.inflate_nis) if math.isfinite(nis) else held
 
+    def _adapted(self, last: _Posterior, prior: Belief, d: PersonDetection) -> float:
+        """The factor on the detections' position variance after ``d``: ``last``'s, moved
+        towards what ``d``'s innovation says (``(|e|^2 - tr P) / tr R``, whose mean is the
+        true factor while the filter's prediction is honest), averaged over
+        ``adapt_time_s`` and kept in [1, ``adapt_noise_max``]. One
+        sample moves it at most as far as ``adapt_noise_max`` times its value, so a
+        manoeuvre or an outlier cannot make the detections look noisier at once."""
+        p = self.params
+        k = p.adapt_noise_max
+        if k == 1.0 or d.covariance is not None and not any(d.covariance):
+            return last.noise_scale
+        e2 = (d.x - prior.x[0]) ** 2 + (d.y - prior.x[1]) ** 2
+        r = float(np.trace(position_cov(d, p)))
+        sample = (e2 - float(prior.p[0, 0] + prior.p[1, 1])) / r if r > 0.0 else 1.0
+        if not math.isfinite(sample):
+            return last.noise_scale
+        sample = min(max(sample, 0.0), k * last.noise_scale)
+        w = 1.0 - math.exp(-(d.t - last.t) / p.adapt_time_s)
+        return min(max(last.noise_scale + w * (sample - last.noise_scale), 1.0), k)
+
     def _start(self, d: PersonDetection) -> _Posterior:
-        return _Posterior(d.t, d, self._filter.start(d))
+        """A new track at ``d``, keeping what was learned of the detector's noise."""
+        scale = self._history[-1].noise_scale if self._history else 1.0
+        return _Posterior(d.t, d, self._filter.start(d), noise_scale=scale)
 
     def _reacquire(self, group: list[PersonDetection]) -> None:
         """No track (or lost): the first detection starts one; after a loss, detections must

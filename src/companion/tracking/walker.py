@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.geometry import unicycle_step, wrap_pi
-from companion.params import TrackerParams
+from companion.params import SensingParams, TrackerParams
 from companion.tracking.imm import compiled_predict, compiled_update, mixture
 from companion.types import PersonDetection, PersonState
 
@@ -77,8 +77,9 @@ class WalkerFilter:
     (:mod:`.imm`); :class:`companion.tracking.reference.ReferenceFilter` is the same filter
     on filterpy's UKF, which the tests compare it with."""
 
-    def __init__(self, params: TrackerParams):
-        self.params = params
+    def __init__(self, params: TrackerParams, sensing: SensingParams | None = None):
+        self.params = params.for_sensing(sensing or SensingParams())   # declared noise
+        params = self.params
         self._noise = np.array(((params.accel_std, params.turn_accel_std),
                                 (params.maneuver_accel_std, params.maneuver_turn_accel_std)))
 
@@ -112,27 +113,29 @@ class WalkerFilter:
         return Belief(*compiled_predict(b.xs, b.ps, b.mu, dt, self._noise,
                                         p.maneuver_start_rate, p.maneuver_end_rate))
 
-    def update(self, b: Belief, d: PersonDetection) -> Belief:
-        """``b`` (at ``d``'s time) updated with ``d``; the models' probabilities by how well
-        each predicted it."""
+    def update(self, b: Belief, d: PersonDetection, scale: float = 1.0) -> Belief:
+        """``b`` (at ``d``'s time) updated with ``d`` (its position variance times ``scale``);
+        the models' probabilities by how well each predicted it."""
         p = self.params
         if is_exact(d):
             return _both(exact_state(d), np.zeros((5, 5)), b.mu[1])
-        z, r, heading, velocity = measurement(d, p)
+        z, r, heading, velocity = measurement(d, p, scale)
         return Belief(*compiled_update(b.xs, b.ps, b.mu, z, r, heading, velocity,
                                        p.max_person_speed, p.max_person_turn_rate))
 
 
 def position_nis(x: np.ndarray, cov: np.ndarray, d: PersonDetection, p: TrackerParams,
-                 floor: float = MIN_STD) -> float:
-    """Squared Mahalanobis distance of ``d``'s position from the state ``x`` with covariance
-    ``cov`` (both covariances and ``floor`` m of tolerance together; 2 degrees of freedom, so
-    about 2 on average when the filter is honest); inf where it cannot be computed."""
+                 floor: float = MIN_STD, scale: float = 1.0) -> float:
+    """Squared Mahalanobis distance of ``d``'s position (its variance times ``scale``) from
+    the state ``x`` with covariance ``cov`` (both covariances and ``floor`` m of tolerance
+    together; 2 degrees of freedom, so about 2 on average when the filter is honest); inf
+    where it cannot be computed."""
     dx, dy = d.x - x[0], d.y - x[1]
     if d.covariance is None:
         ra, rb, rc = p.position_std_m ** 2, 0.0, p.position_std_m ** 2
     else:
         ra, rb, rc = d.covariance[0], 0.5 * (d.covariance[1] + d.covariance[2]), d.covariance[3]
+    ra, rb, rc = scale * ra, scale * rb, scale * rc
     a = cov[0, 0] + ra + floor ** 2
     c = cov[1, 1] + rc + floor ** 2
     b = 0.5 * (cov[0, 1] + cov[1, 0]) + rb
@@ -177,11 +180,11 @@ def heading_std(d: PersonDetection, p: TrackerParams) -> float:
     return p.heading_std_rad if d.heading_std is None else d.heading_std
 
 
-def measurement(d: PersonDetection, p: TrackerParams
+def measurement(d: PersonDetection, p: TrackerParams, scale: float = 1.0
                 ) -> tuple[np.ndarray, np.ndarray, bool, bool]:
     """What ``d`` measures of the state: ``(z, R, heading, velocity)``, the measurement
     (:func:`.imm.measured`: position, the heading if ``heading``, the speed and turn rate if
-    ``velocity``) and its noise covariance."""
+    ``velocity``) and its noise covariance (the position's times ``scale``)."""
     z, stds = [d.x, d.y], []
     heading = d.heading is not None
     velocity = d.speed is not None and d.turn_rate is not None
@@ -192,7 +195,7 @@ def measurement(d: PersonDetection, p: TrackerParams
         z += [d.speed, d.turn_rate]
         stds += list(d.velocity_std or (p.initial_speed_std, p.initial_turn_rate_std))
     r = np.zeros((len(z), len(z)))
-    r[:2, :2] = position_cov(d, p)
+    r[:2, :2] = scale * position_cov(d, p)
     for k, s in enumerate(stds, start=2):
         r[k, k] = s * s
     r += MIN_STD ** 2 * np.eye(len(z))   # floor
