@@ -112,7 +112,8 @@ class TrackerParams(Validated):
                                          "coordinate when the detection gives no covariance; "
                                          "absent: the noise the sensing declares "
                                          "(person_declared_noise_m, else "
-                                         "person_position_noise_m; at least 1 mm)", positive)
+                                         "person_position_noise_m), or 0.05 where it "
+                                         "declares 0", positive)
     heading_std_rad: float | None = param(None, "rad", "standard deviation of a detected "
                                           "heading when the detection gives none; absent: the "
                                           "declared sensing's person_heading_noise_rad, or "
@@ -202,8 +203,8 @@ class TrackerParams(Validated):
         """These settings with the noise of detections that give none taken from the declared
         ``sensing`` where they are absent."""
         pos, heading = self.position_std_m, self.heading_std_rad
-        if pos is None:
-            pos = max(sensing.declared_noise_m, 1e-3)
+        if pos is None:   # an exact (ideal) sensor gives whole states, not bare positions
+            pos = sensing.declared_noise_m or 0.05
         if heading is None:
             declared = sensing.person_heading_noise_rad
             heading = declared if declared else 0.1
