@@ -164,6 +164,8 @@ def build_scenario(args: argparse.Namespace) -> Scenario:
         changes["duration"] = duration_arg(args.duration, dt=sc.params.dt)
     if args.obstacles:
         changes["obstacle_source"] = args.obstacles
+    if getattr(args, "seed", None) is not None:
+        changes["seed"] = seed_arg(args.seed)
     changes["params"] = with_sensing(sc.params, args)
     return dataclasses.replace(sc, **changes)
 

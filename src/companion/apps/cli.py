@@ -80,6 +80,8 @@ def parser() -> argparse.ArgumentParser:
                      "with a Foxglove scene, through the ROS 2 node (docs/recording.md)")
     run.add_argument("--animate", metavar="FILE", help="also draw the run as an animation: "
                      "FILE.gif, or FILE.mp4 where ffmpeg is on PATH (docs/animations.md)")
+    run.add_argument("--seed", type=int, metavar="N", help="seed of the sensing noise, "
+                     f"{rng('--seed', 'N')} (default: the scenario's, 0 unless it sets one)")
     _sensing(run)
     run.set_defaults(func="cmd_run")
 

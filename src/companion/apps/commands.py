@@ -147,7 +147,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     # Everything is written before anything is printed: a reader that goes away early
     # (| head) cannot cut the outputs short.
     print(f"{sc.name}: {sc.description}")
-    print(f"controller {sc.controller}, {sc.duration:g} s, side bearing "
+    print(f"controller {sc.controller}, {sc.duration:g} s, seed {sc.seed}, side bearing "
           f"{sc.params.formation.bearing:.4f} rad, distance {sc.params.formation.distance:g} m")
     print("\n".join(summary_lines(m)))
     print(f"wrote {', '.join(written)} in {out}")

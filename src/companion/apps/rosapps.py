@@ -17,7 +17,6 @@ from companion.apps.args import (
     duration_arg,
     number_arg,
     output_dir,
-    seed_arg,
     with_sensing,
 )
 from companion.apps.bags import bag_arg, bag_outputs
@@ -163,8 +162,6 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
         ros = dataclasses.replace(ros, use_sim_time=True)   # other rates need /clock
     lockstep = LOCKSTEP_WAIT_S if args.lockstep else 0.0
     wait = number_arg(args.wait, "--wait", "S")
-    if args.seed is not None:
-        sc = dataclasses.replace(sc, seed=seed_arg(args.seed))
     out = output_dir(Path(args.out or Path("out") / f"sim-robot-{sc.name}"))
     bag = bag_arg(args.bag)
     warm_up()

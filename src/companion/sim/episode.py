@@ -1,12 +1,15 @@
 """Closed-loop episode: person motion, sensing, controller and a unicycle plant with lag.
 
+:class:`Simulator` is the world of one episode, steppable from outside: ``reset(seed)`` gives
+the first observation, ``step(command)`` applies a command for one period and gives the next.
 At each sample ``k`` (time ``t_k = k * dt``) the robot observes its pose and velocity
 (odometry), the person detections that have arrived (:class:`~companion.sim.sensing.PersonSensor`)
-and the obstacles it knows; the command is held for one period while the robot's actual
-velocities follow it through the first-order lag ``sensing.actuator_tau_s`` and the unicycle
-is integrated along the arc of the period's mean velocity (exact without lag,
-:func:`companion.geometry.unicycle_step`). Row ``k`` of the log holds the true state at
-``t_k``, the command applied from ``t_k`` on and the tracker's estimate. The run is
+and the obstacles it knows, as the active faults corrupt them; the command is held for one
+period while the robot's actual velocities follow it through the first-order lag
+``sensing.actuator_tau_s`` and the unicycle is integrated along the arc of the period's mean
+velocity (exact without lag, :func:`companion.geometry.base_step`). Row ``k`` of the log
+holds the true state at ``t_k``, the command applied from ``t_k`` on and the tracker's
+estimate. :func:`episode_blocks` drives a simulator with a controller. The episode is
 deterministic for a given seed.
 """
 
@@ -142,76 +145,134 @@ def episode_blocks(controller: Controller, person: PersonMotion, params: Params,
         At the first block, for a duration shorter than one period or sensing the controller
         cannot use.
     """
-    dt, d, tau = params.dt, params.robot.d, params.sensing.actuator_tau_s
-    f = params.formation
-    n = int(round(duration / dt))
-    if n < 1:
-        raise ConfigError(f"duration: expected at least one sample period ({dt:g} s), "
-                          f"got {duration:g} s")
+    detections = getattr(controller, "takes_detections", False)
+    sim = Simulator(person, params, duration, start, obstacles, perception, faults,
+                    start_velocity, detections)
     if rows < 1:
         raise ConfigError(f"rows: expected a block of at least one row, got {rows}")
-    detections = getattr(controller, "takes_detections", False)
     if not detections and params.sensing != IDEAL:
         raise ConfigError("sensing: a controller without the standard stack sees the true "
                           "person state, which needs ideal sensing")
-    rng = np.random.default_rng(seed)
-    sensor = PersonSensor(params, person, rng)
-    block = _Block(min(rows, n))
-    obstacles = tuple(obstacles)
-    perception = perception or GroundTruth()
-    perception.reset()
     controller.reset()
-    handover = ()
-    if start is None:
-        h0 = person.state(0.0)
-        pose = start_in_slot(h0, params)
-        ref = slot_reference(h0.v, h0.omega, f.distance, f.bearing, d)
-        start_velocity = start_velocity or (ref.v, ref.omega)
-        handover = (sensor.handover(0.0),) if detections else ()
-    else:
-        pose = start
-    if start_velocity is not None:
-        controller.applied(Command(*start_velocity))
-    x, y, th = pose.x, pose.y, pose.theta
-    va, wa = start_velocity or (0.0, 0.0)
-    cmd = Command(0.0, 0.0)
-    base = start_velocity or (0.0, 0.0)   # what the base executes: the last command, or a stop
-    last_command = 0.0
-    seen = None   # where the robot believes the person is (for the LiDAR's person exclusion)
-    for k in range(n):
-        t = k * dt
-        h = person.state(t)
-        arrived = (*handover, *sensor.detections(t)) if detections else ()
-        handover = ()
-        if not detections:
-            seen = (h.x, h.y)
+    obs = sim.reset(seed)
+    if sim.start_velocity is not None:
+        controller.applied(Command(*sim.start_velocity))
+    block = _Block(min(rows, sim.steps))
+    while obs is not None:
+        # a stalled controller is not called: the last command stays in force
+        obs = sim.step(None if sim.stalled else controller.step(obs))
+        block.add(*sim.row)
+        if block.full() or obs is None:
+            yield block.log()
+            block = _Block(min(rows, sim.steps - sim.k))
+
+
+class Simulator:
+    """The world of one episode (person, sensing, obstacles, faults, the robot's base).
+
+    ``detections``: the controller takes person detections (the standard stack); otherwise
+    the observation carries the true person state. ``start``, ``start_velocity``: see
+    :func:`companion.sim.episode.episode_blocks`.
+    """
+
+    def __init__(self, person: PersonMotion, params: Params, duration: float,
+                 start: Pose | None = None, obstacles: Sequence[Obstacle] = (),
+                 perception: Perception | None = None, faults: Sequence[Fault] = (),
+                 start_velocity: tuple[float, float] | None = None, detections: bool = True):
+        self.steps = int(round(duration / params.dt))
+        if self.steps < 1:
+            raise ConfigError(f"duration: expected at least one sample period "
+                              f"({params.dt:g} s), got {duration:g} s")
+        self.person, self.params, self.start = person, params, start
+        self.obstacles, self.faults = tuple(obstacles), tuple(faults)
+        self.perception = perception or GroundTruth()
+        self.detections = detections
+        self._start_velocity = start_velocity
+        self.k = 0
+        self.row: tuple[tuple[float, ...], str, str] | None = None
+
+    def reset(self, seed: int = 0) -> Observation:
+        """Start the episode over with the sensing noise of ``seed``; the first observation.
+        :attr:`start_velocity` is then the velocity the robot starts with (None: at rest),
+        which a controller should be told (``controller.applied``)."""
+        p, f = self.params, self.params.formation
+        self._rng = np.random.default_rng(seed)
+        self._sensor = PersonSensor(p, self.person, self._rng)
+        self.perception.reset()
+        self._handover: tuple = ()
+        self.start_velocity = self._start_velocity
+        if self.start is None:
+            h0 = self.person.state(0.0)
+            pose = start_in_slot(h0, p)
+            ref = slot_reference(h0.v, h0.omega, f.distance, f.bearing, p.robot.d)
+            self.start_velocity = self._start_velocity or (ref.v, ref.omega)
+            self._handover = (self._sensor.handover(0.0),) if self.detections else ()
+        else:
+            pose = self.start
+        self._x, self._y, self._th = pose.x, pose.y, pose.theta
+        self._va, self._wa = self.start_velocity or (0.0, 0.0)
+        self._cmd = Command(0.0, 0.0)
+        self._base = self.start_velocity or (0.0, 0.0)   # what the base executes
+        self._last_command = 0.0
+        self._seen: tuple[float, float] | None = None    # where the robot believes the person is
+        self.k = 0
+        self.row = None
+        return self._observe()
+
+    @property
+    def stalled(self) -> bool:
+        """A ``stall`` fault is active now: the controller is not to be called."""
+        return stalled(self.faults, self.k * self.params.dt)
+
+    def _observe(self) -> Observation:
+        """The observation of sample :attr:`k`, as the active faults corrupt it."""
+        t = self.k * self.params.dt
+        h = self.person.state(t)
+        arrived = (*self._handover, *self._sensor.detections(t)) if self.detections else ()
+        self._handover = ()
+        if not self.detections:
+            self._seen = (h.x, h.y)
         elif arrived:
-            seen = (arrived[-1].x, arrived[-1].y)
-        known = perception.obstacles(k, Pose(x, y, th), obstacles, (h.x, h.y), seen, rng)
-        if not stalled(faults, t):  # a stalled controller leaves the last command in force
-            obs = Observation(t, Pose(x, y, th), None if detections else h, known,
-                              perception.scan(), (va, wa), arrived)
-            cmd = controller.step(apply_faults(obs, faults))
-            base, last_command = (cmd.v, cmd.omega), t
-        elif t - last_command >= params.robot.command_timeout_s - 1e-9:
-            base = timed_out(base, params)
+            self._seen = (arrived[-1].x, arrived[-1].y)
+        pose = Pose(self._x, self._y, self._th)
+        known = self.perception.obstacles(self.k, pose, self.obstacles, (h.x, h.y), self._seen,
+                                          self._rng)
+        obs = Observation(t, pose, None if self.detections else h, known,
+                          self.perception.scan(), (self._va, self._wa), arrived)
+        return apply_faults(obs, self.faults)
+
+    def step(self, command: Command | None) -> Observation | None:
+        """Apply ``command`` from the current sample on (None: no new command, as from a
+        stalled controller: the last one stays in force until the base's command timeout,
+        then the base brakes); record :attr:`row`; advance one period. The next observation,
+        or None after the last sample."""
+        if self.row is not None and self.k >= self.steps:
+            raise RuntimeError("step: the episode is over; reset() starts it again")
+        p, f, d = self.params, self.params.formation, self.params.robot.d
+        t = self.k * p.dt
+        if command is not None:
+            self._cmd, self._base, self._last_command = command, (command.v, command.omega), t
+        elif t - self._last_command >= p.robot.command_timeout_s - 1e-9:
+            self._base = timed_out(self._base, p)
+        cmd = self._cmd
         e = cmd.estimate
-        if e is not None and detections:
-            seen = (e.state.x, e.state.y)
+        if e is not None and self.detections:
+            self._seen = (e.state.x, e.state.y)
         est = _NO_ESTIMATE if e is None else (e.state.x, e.state.y, e.state.theta, e.state.v,
                                               e.state.omega, e.position_std)
+        x, y, th, va, wa = self._x, self._y, self._th, self._va, self._wa
+        h = self.person.state(t)
         rho, alpha, beta = relative_state(x, y, th, h.x, h.y, h.theta, d)
         beta_ref = slot_reference(h.v, h.omega, f.distance, f.bearing, d).beta
-        block.add((t, x, y, th, h.x, h.y, h.theta, h.v, h.omega, rho, alpha, beta,
-                   f.distance, f.bearing, beta_ref, cmd.v, cmd.omega, cmd.u_ob,
-                   nearest_clearance(x, y, obstacles, params.robot.radius), va, wa, *est,
-                   *error_split(Pose(x, y, th), h, cmd, params)),
-                  cmd.status, cmd.reason)
-        if block.full() or k == n - 1:
-            yield block.log()
-            block = _Block(min(rows, n - k - 1))
-        x, y, th, va, wa = base_step(x, y, th, va, wa, base[0], base[1], tau, dt)
-        th = wrap_pi(th)
+        self.row = ((t, x, y, th, h.x, h.y, h.theta, h.v, h.omega, rho, alpha, beta,
+                     f.distance, f.bearing, beta_ref, cmd.v, cmd.omega, cmd.u_ob,
+                     nearest_clearance(x, y, self.obstacles, p.robot.radius), va, wa, *est,
+                     *error_split(Pose(x, y, th), h, cmd, p)), cmd.status, cmd.reason)
+        x, y, th, self._va, self._wa = base_step(x, y, th, va, wa, *self._base,
+                                                 p.sensing.actuator_tau_s, p.dt)
+        self._x, self._y, self._th = x, y, wrap_pi(th)
+        self.k += 1
+        return self._observe() if self.k < self.steps else None
 
 
 class _Block:
