@@ -40,7 +40,7 @@ from companion.params import IDEAL, REALISTIC, Params
 from companion.sim import fuzz
 from companion.sim.recorded import RecordedPerson
 from companion.sim.runner import run_many
-from companion.sim.sensing import PersonSensor
+from companion.sim.sensing import PersonSensor, streams
 from companion.tracking import PersonTracker
 
 #: Rayleigh tails: P(|e| > k sigma) for a 2D Gaussian of per-axis std sigma.
@@ -71,7 +71,8 @@ def open_loop(track: pedestrians.Track, params: Params, seed: int
     """The NIS of every accepted detection and the position NEES at every control instant
     of the tracker alone following ``track``'s person through ``params``' sensor."""
     person = RecordedPerson(track.t, track.x, track.y)
-    sensor = PersonSensor(params, person, np.random.default_rng(seed))
+    rng = streams(seed)
+    sensor = PersonSensor(params, person, rng["person_sensor"], rng["person_dropout"])
     tracker = PersonTracker(params.tracker, params.sensing)
     nis, nees = [], []
     for k in range(int(person.duration / params.dt) + 1):

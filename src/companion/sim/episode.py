@@ -29,7 +29,7 @@ from companion.params import IDEAL, Params
 from companion.sim.faults import Fault, stalled
 from companion.sim.faults import apply as apply_faults
 from companion.sim.person import PersonMotion
-from companion.sim.sensing import GroundTruth, Perception, PersonSensor
+from companion.sim.sensing import GroundTruth, Perception, PersonSensor, streams
 from companion.types import LOG_COLUMNS, Command, Log, Observation, Obstacle, PersonState, Pose
 
 _NO_ESTIMATE = (math.nan,) * 6
@@ -196,8 +196,9 @@ class Simulator:
         :attr:`start_velocity` is then the velocity the robot starts with (None: at rest),
         which a controller should be told (``controller.applied``)."""
         p, f = self.params, self.params.formation
-        self._rng = np.random.default_rng(seed)
-        self._sensor = PersonSensor(p, self.person, self._rng)
+        self._rng = streams(seed)
+        self._sensor = PersonSensor(p, self.person, self._rng["person_sensor"],
+                                    self._rng["person_dropout"])
         self.perception.reset()
         self._handover: tuple = ()
         self.start_velocity = self._start_velocity
@@ -236,7 +237,7 @@ class Simulator:
             self._seen = (arrived[-1].x, arrived[-1].y)
         pose = Pose(self._x, self._y, self._th)
         known = self.perception.obstacles(self.k, pose, self.obstacles, (h.x, h.y), self._seen,
-                                          self._rng)
+                                          self._rng["lidar"])
         obs = Observation(t, pose, None if self.detections else h, known,
                           self.perception.scan(), (self._va, self._wa), arrived)
         return apply_faults(obs, self.faults)

@@ -150,10 +150,10 @@ def cast(pose: Pose, circles: Sequence[Circle], walls: Sequence[Wall],
                                                       w[:, 2], w[:, 3]))
 
     ranges[ranges > params.range_max] = np.inf
-    if rng is not None and params.noise_std > 0.0:
+    if rng is not None and params.noise_std > 0.0:   # one draw per beam, hit or not, so
+        noise = rng.normal(0.0, params.noise_std, len(ranges))   # the noise is the beam's
         hit = np.isfinite(ranges)
-        ranges[hit] = np.maximum(ranges[hit] + rng.normal(0.0, params.noise_std, int(hit.sum())),
-                                 0.0)
+        ranges[hit] = np.maximum(ranges[hit] + noise[hit], 0.0)
     return Scan(angles=angles.copy(), ranges=ranges, x=ox, y=oy, theta=th,
                 range_max=params.range_max)
 

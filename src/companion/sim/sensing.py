@@ -5,7 +5,9 @@ profile says (rate, noise, latency, dropouts, holes in a recording). For obstacl
 perception model is asked once per control step for the obstacles the controller knows about
 (world frame): ``GroundTruth`` passes the world's obstacles through; ``LidarPerception`` casts
 a scan at the LiDAR's rate, extracts circles from it (the tracked person excluded) and holds
-them until the next scan.
+them until the next scan. Each noise source draws from its own random stream
+(:func:`streams`), so two controllers run on one seed see the same person detections and the
+same LiDAR noise.
 """
 
 from __future__ import annotations
@@ -22,6 +24,19 @@ from companion.sim.lidar import cast
 from companion.sim.person import PersonMotion
 from companion.types import Circle, Obstacle, PersonDetection, PersonState, Pose, Scan, Wall
 
+#: The noise sources of an episode, in the order their streams are spawned (a new source goes
+#: at the end, so that the others keep their streams).
+SOURCES = ("person_sensor", "person_dropout", "lidar")
+
+
+def streams(seed: int) -> dict[str, np.random.Generator]:
+    """One random generator per source of :data:`SOURCES`, spawned from ``seed`` (numpy
+    ``SeedSequence``): what one source draws does not depend on what the others drew, so a
+    controller that moves differently (and so draws LiDAR noise at other moments, or gets
+    other scans) cannot change the person detections."""
+    children = np.random.SeedSequence(seed).spawn(len(SOURCES))
+    return {name: np.random.default_rng(c) for name, c in zip(SOURCES, children)}
+
 
 class PersonSensor:
     """Detections of the person as ``params.sensing`` describes them.
@@ -29,12 +44,15 @@ class PersonSensor:
     A detection shows the true person at its time ``t_s`` (one every ``1 / person_rate_hz``
     s from a random phase, or one per control step at an infinite rate) with Gaussian noise
     on the position (and on heading, speed and turn rate where those are measured), and
-    arrives ``person_latency_s`` later. It is lost with probability ``person_dropout``, and
-    never made while the motion says the person is not observed (a hole in a recording).
+    arrives ``person_latency_s`` later. It is lost with probability ``person_dropout`` (drawn
+    from ``dropout``, default ``rng``), and never made while the motion says the person is
+    not observed (a hole in a recording).
     """
 
-    def __init__(self, params: Params, person: PersonMotion, rng: np.random.Generator):
+    def __init__(self, params: Params, person: PersonMotion, rng: np.random.Generator,
+                 dropout: np.random.Generator | None = None):
         self.sensing, self.dt, self.person, self.rng = params.sensing, params.dt, person, rng
+        self.dropout = rng if dropout is None else dropout
         self.frame = params.tracker.world_frame
         rate = self.sensing.person_rate_hz
         self.period = 0.0 if rate == np.inf else 1.0 / rate   # 0: one per control step
@@ -69,7 +87,7 @@ class PersonSensor:
         s = self.sensing
         observed = getattr(self.person, "observed", None)
         if (observed is not None and not observed(ts)) \
-                or (s.person_dropout > 0.0 and self.rng.random() < s.person_dropout):
+                or (s.person_dropout > 0.0 and self.dropout.random() < s.person_dropout):
             return None
         h: PersonState = self.person.state(ts)
         pos = s.person_position_noise_m
