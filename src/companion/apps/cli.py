@@ -91,6 +91,18 @@ def parser() -> argparse.ArgumentParser:
     _workers(rp)
     rp.set_defaults(func="cmd_reproduce")
 
+    ev = sub.add_parser("evaluate", help="run an evaluation suite (every combination of person "
+                        "motions, sides, sensing, controllers and seeds) and summarise it with "
+                        "intervals and paired comparisons (docs/evaluation.md)")
+    ev.add_argument("suite", help="suite TOML file (see suites/)")
+    ev.add_argument("--out", metavar="DIR", help="output folder (default out/evaluate-NAME); "
+                    "a killed run continues there on the next call")
+    ev.add_argument("--dask", metavar="ADDRESS", help="run on Dask: 'local' starts a "
+                    "LocalCluster on 127.0.0.1, tcp://HOST:PORT uses a running scheduler "
+                    "(default: local worker processes)")
+    _workers(ev)
+    ev.set_defaults(func="evaluation.cmd_evaluate")
+
     tn = sub.add_parser("tune", help="tune a controller's gains (docs/baselines.md)")
     tn.add_argument("controller", choices=TUNABLE)
     tn.add_argument("--budget", type=int, default=64, metavar="N",

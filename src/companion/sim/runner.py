@@ -15,7 +15,7 @@ import os
 import signal
 import sys
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Any, NamedTuple
@@ -143,6 +143,32 @@ def run_many(specs: Sequence[EpisodeSpec], workers: int | None = None,
         raise
     pool.shutdown()
     return results
+
+
+def run_unordered(specs: Sequence[EpisodeSpec], workers: int | None,
+                  func: Callable[[EpisodeSpec], Any]) -> Iterator[tuple[int, Any]]:
+    """``(index, func(spec))`` for every spec, as each finishes (in worker processes unless
+    ``workers`` is 1): a caller can keep each result before the others are done. ``func`` is
+    a module-level function of the spec (it runs the episode itself)."""
+    workers = default_workers() if workers is None else workers
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ConfigError(f"workers: expected a positive integer, got {workers!r}")
+    if workers == 1 or len(specs) <= 1:
+        for i, spec in enumerate(specs):
+            yield i, func(spec)
+        return
+    warm_up()
+    context = multiprocessing.get_context("fork") if sys.platform.startswith("linux") else None
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(specs)), mp_context=context,
+                               initializer=_worker_signals)
+    try:
+        futures = {pool.submit(func, spec): i for i, spec in enumerate(specs)}
+        for future in as_completed(futures):
+            yield futures[future], future.result()
+    except BaseException:
+        _stop(pool)
+        raise
+    pool.shutdown()
 
 
 def _worker_signals() -> None:

@@ -1,0 +1,75 @@
+"""``companion evaluate SUITE.toml``: run a suite (:mod:`companion.evaluate`) and write
+episodes.csv, summary.json, summary.md and the figures; print the summary."""
+
+from __future__ import annotations
+
+import argparse
+import re
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+
+from companion.apps.args import output_dir, workers_arg
+from companion.apps.commands import progress_bar
+from companion.evaluate.report import write_episodes, write_summary
+from companion.evaluate.run import finish, run_suite
+from companion.evaluate.stats import summarize
+from companion.evaluate.suite import load_suite
+from companion.io import Outputs, save_figure
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    suite = load_suite(args.suite)
+    out = output_dir(Path(args.out or Path("out") / f"evaluate-{suite.name}"))
+    workers = workers_arg(args)
+    controllers = list(dict.fromkeys(e.controller for e in suite.episodes))
+    print(f"{suite.name}: {len(suite.episodes)} episodes ({', '.join(controllers)}; "
+          f"reference {suite.reference}) on "
+          f"{'local worker processes' if args.dask is None else 'Dask ' + args.dask}")
+    with progress_bar(len(suite.episodes), "episode") as bar:
+        rows = run_suite(suite, out, workers, args.dask, lambda done, total: bar(done))
+    summary = summarize(rows, suite.reference)
+    with Outputs(out, "evaluate") as stage:
+        write_episodes(stage / "episodes.csv", rows)
+        write_summary(stage, suite.name, suite.reference, summary)
+        for name, fig in figures(rows, suite.reference):
+            save_figure(fig, stage / name)
+            plt.close(fig)
+    finish(out)
+    print((out / "summary.md").read_text(encoding="utf-8"))
+    print(f"wrote episodes.csv, summary.json, summary.md and the figures in {out}")
+    return 0
+
+
+def figures(rows: list[dict], reference: str) -> list[tuple[str, plt.Figure]]:
+    """Per condition: the slot error of every controller (box plots over episodes), and
+    each controller's paired difference from ``reference``."""
+    out = []
+    conditions = sorted({(r["sensing"], r["group"]) for r in rows})
+    for sensing, group in conditions:
+        here = [r for r in rows if r["sensing"] == sensing and r["group"] == group]
+        names = list(dict.fromkeys(r["controller"] for r in here))
+        fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 4))
+        data = [[100 * r["rms_slot_error_m"] for r in here if r["controller"] == c]
+                for c in names]
+        ax.boxplot(data, tick_labels=names)
+        ax.set_ylabel("slot error RMS (cm)")
+        ax.set_title(f"{sensing} / {group}: per episode")
+        ref = {r["pair"]: r["rms_slot_error_m"] for r in here if r["controller"] == reference}
+        others = [c for c in names if c != reference]
+        diffs = [[100 * (r["rms_slot_error_m"] - ref[r["pair"]]) for r in here
+                  if r["controller"] == c and r["pair"] in ref] for c in others]
+        if others:
+            bx.boxplot(diffs, tick_labels=others)
+            bx.axhline(0.0, color="0.5", lw=0.8)
+        bx.set_ylabel(f"slot error minus {reference}'s (cm)")
+        bx.set_title("paired with the reference (below 0: better)")
+        for axis in (ax, bx):
+            axis.grid(alpha=0.3)
+        fig.tight_layout()
+        safe = re.sub(r"[^A-Za-z0-9_.-]+", "-", f"{sensing}_{group}")
+        out.append((f"slot_{safe}.png", fig))
+    return out

@@ -1,0 +1,142 @@
+"""Running a suite: every episode once, on local worker processes or a Dask cluster, each
+result kept as soon as it is known so that a killed run resumes where it stopped.
+
+Results are kept in ``<out>/.evaluate.partial/episodes.jsonl``, one JSON line per finished
+episode, appended and flushed to disk one at a time (a line cut short by a kill is ignored).
+The file's first line holds the suite's digest; a changed suite starts over. An episode's
+result depends on its spec alone, so the same suite gives the same results whatever the
+number or kind of workers.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+from companion.evaluate.suite import Suite
+from companion.metrics import compute
+from companion.sim.fuzz import episode_counts
+from companion.sim.runner import EpisodeSpec, run_one, run_unordered
+
+PARTIAL = ".evaluate.partial"
+#: Safety counts kept per episode (companion.sim.fuzz.episode_counts).
+COUNTS = ("person_collisions", "person_collisions_robot", "violations", "obstacle_collisions")
+
+
+def summary_row(spec: EpisodeSpec) -> dict[str, Any]:
+    """Run one episode and reduce it to its numbers: every scalar metric of
+    :func:`companion.metrics.compute`, the fuzz's safety counts against the true person, and
+    ``safe`` (no robot-caused contact or protective violation, no obstacle contact)."""
+    log = run_one(spec)
+    m = compute(log)
+    row = {k: (math.nan if v is None else float(v)) for k, v in m.items()
+           if v is None or isinstance(v, (int, float))}
+    counts = episode_counts(log, spec.params, spec.obstacles)
+    row.update({k: int(counts[k]) for k in COUNTS})
+    row["safe"] = (counts["person_collisions_robot"] == 0 and counts["violations"] == 0
+                   and counts["obstacle_collisions"] == 0)
+    return row
+
+
+def run_suite(suite: Suite, out: Path, workers: int | None = None, dask: str | None = None,
+              progress: Callable[[int, int], None] | None = None) -> list[dict]:
+    """One row per episode of ``suite`` (its factors, ``episode``, ``pair`` and its
+    numbers), in the suite's order; the episodes kept under ``out`` from an earlier call are
+    not run again. ``dask``: None (local worker processes), ``"local"`` (a Dask LocalCluster
+    on 127.0.0.1) or a scheduler address. ``progress(done, total)`` after each episode."""
+    store = Path(out) / PARTIAL / "episodes.jsonl"
+    done = _load(store, suite.digest)
+    todo = [e for e in suite.episodes if e.key not in done]
+    total = len(suite.episodes)
+    if progress:
+        progress(total - len(todo), total)
+    with _Appender(store, suite.digest) as keep:
+        for n, (i, result) in enumerate(_backend(dask, workers, [e.spec for e in todo]), 1):
+            done[todo[i].key] = result
+            keep(todo[i].key, result)
+            if progress:
+                progress(total - len(todo) + n, total)
+    return [{**e.factors, "episode": e.key, "pair": e.pair, **done[e.key]}
+            for e in suite.episodes]
+
+
+def finish(out: Path) -> None:
+    """Forget the kept episodes once the outputs are written."""
+    store = Path(out) / PARTIAL
+    for f in store.glob("*"):
+        f.unlink()
+    if store.exists():
+        store.rmdir()
+
+
+def _backend(dask: str | None, workers: int | None, specs: Sequence[EpisodeSpec]
+             ) -> Iterator[tuple[int, dict]]:
+    if not specs:
+        return iter(())
+    if dask is None:
+        return run_unordered(specs, workers, summary_row)
+    from companion.evaluate.dask_backend import run_dask
+    return run_dask(specs, dask, workers, summary_row)
+
+
+def _load(store: Path, digest: str) -> dict[str, dict]:
+    """The results kept for a suite of ``digest`` (none if the store is for another)."""
+    if not store.exists():
+        return {}
+    lines = store.read_text(encoding="utf-8").splitlines()
+    try:
+        header = json.loads(lines[0]) if lines else {}
+    except json.JSONDecodeError:
+        return {}
+    if header.get("digest") != digest:
+        return {}
+    out = {}
+    for line in lines[1:]:
+        try:
+            item = json.loads(line)
+        except json.JSONDecodeError:       # the last line of a killed run: run it again
+            continue
+        out[item["key"]] = item["result"]
+    return out
+
+
+class _Appender:
+    """Appends one JSON line per result to the store, flushed and synced each time."""
+
+    def __init__(self, store: Path, digest: str):
+        self.store, self.digest = store, digest
+
+    def __enter__(self) -> Callable[[str, dict], None]:
+        self.store.parent.mkdir(parents=True, exist_ok=True)
+        fresh = not self.store.exists() or not _load_header_ok(self.store, self.digest)
+        if not fresh:                       # drop a line a kill cut short
+            data = self.store.read_bytes()
+            if not data.endswith(b"\n"):
+                with open(self.store, "r+b") as f:
+                    f.truncate(data.rfind(b"\n") + 1)
+        self._file = open(self.store, "w" if fresh else "a", encoding="utf-8")
+        if fresh:
+            self._write({"digest": self.digest})
+        return lambda key, result: self._write({"key": key, "result": result})
+
+    def _write(self, item: dict) -> None:
+        self._file.write(json.dumps(item, allow_nan=True) + "\n")
+        self._file.flush()
+        os.fsync(self._file.fileno())
+
+    def __exit__(self, *exc: object) -> None:
+        self._file.close()
+
+
+def _load_header_ok(store: Path, digest: str) -> bool:
+    with open(store, encoding="utf-8") as f:
+        first = f.readline()
+    try:
+        return json.loads(first).get("digest") == digest
+    except json.JSONDecodeError:
+        return False
+

@@ -1,0 +1,152 @@
+"""companion evaluate: suites parse with clear errors, runs resume and do not depend on the
+backend, and the statistics say what they should."""
+
+import math
+
+import numpy as np
+import pytest
+
+from companion.apps.cli import main
+from companion.errors import ConfigError
+from companion.evaluate import stats
+from companion.evaluate.run import PARTIAL, run_suite
+from companion.evaluate.suite import load_suite
+
+SUITE = """
+name = "tiny"
+reference = "lqr"
+controllers = ["lqr", "pid"]
+sensing = ["realistic"]
+sides = ["left", "right"]
+seeds = 2
+duration = 2.0
+[motions]
+scenarios = ["line"]
+"""
+
+
+def _suite(tmp_path, text=SUITE, name="s.toml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_a_suite_expands_to_every_combination_with_shared_seeds(tmp_path):
+    suite = load_suite(_suite(tmp_path))
+    assert len(suite.episodes) == 2 * 2 * 2          # sides x seeds x controllers
+    by_pair = {}
+    for e in suite.episodes:
+        by_pair.setdefault(e.pair, []).append(e)
+    assert len(by_pair) == 4
+    for pair in by_pair.values():                    # both controllers of a pair: one seed
+        assert {e.controller for e in pair} == {"lqr", "pid"}
+        assert len({e.spec.seed for e in pair}) == 1
+    assert len({e.spec.seed for e in suite.episodes}) == 2
+    assert {e.spec.params.formation.bearing for e in suite.episodes} == \
+        {0.5 * math.pi, 1.5 * math.pi}
+    assert all(e.spec.duration == 2.0 for e in suite.episodes)
+
+
+@pytest.mark.parametrize("change,message", [
+    ('controllers = ["lqr", "pdi"]', "controllers[1].name: expected one of"),
+    ('sides = ["up"]', "sides[0]: expected one of"),
+    ('seeds = 0', "seeds: expected an integer >= 1"),
+    ('sensing = ["perfect"]', "sensing[0]:"),
+    ('reference = "vsm"', "reference: expected one of the controllers"),
+    ('colour = "red"', "colour: unknown key"),
+])
+def test_bad_suites_name_the_file_and_key(tmp_path, change, message):
+    key = change.split(" = ")[0]
+    text = "\n".join(line for line in SUITE.splitlines() if not line.startswith(key + " "))
+    path = _suite(tmp_path, change + "\n" + text)
+    with pytest.raises(ConfigError) as err:
+        load_suite(path)
+    assert str(err.value).startswith(f"{path}: ") and message in str(err.value)
+
+
+def test_a_killed_run_resumes_and_gives_the_uninterrupted_results(tmp_path):
+    suite = load_suite(_suite(tmp_path))
+    whole = run_suite(suite, tmp_path / "whole", workers=1)
+
+    class Killed(Exception):
+        pass
+
+    def kill_after_three(done, total):
+        if done == 3:
+            raise Killed
+    with pytest.raises(Killed):
+        run_suite(suite, tmp_path / "cut", workers=1, progress=kill_after_three)
+    lines = (tmp_path / "cut" / PARTIAL / "episodes.jsonl").read_text().splitlines()
+    assert len(lines) == 1 + 3                       # the header and three episodes
+    with open(tmp_path / "cut" / PARTIAL / "episodes.jsonl", "a") as f:
+        f.write('{"key": "line:left:realis')        # a line a kill cut short
+    first = []
+    resumed = run_suite(suite, tmp_path / "cut", workers=1,
+                        progress=lambda done, total: first.append(done))
+    assert first[0] == 3                             # three were kept, five ran
+    assert _numbers(resumed) == _numbers(whole)
+
+
+def _numbers(rows):
+    return [{k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in r.items()}
+            for r in rows]
+
+
+def test_local_processes_and_a_dask_cluster_give_the_same_results(tmp_path):
+    """Two worker processes and a loopback Dask LocalCluster of two workers give what one
+    process gives."""
+    pytest.importorskip("distributed")
+    suite = load_suite(_suite(tmp_path))
+    one = _numbers(run_suite(suite, tmp_path / "one", workers=1))
+    assert _numbers(run_suite(suite, tmp_path / "two", workers=2)) == one
+    assert _numbers(run_suite(suite, tmp_path / "dask", workers=2, dask="local")) == one
+
+
+def test_binomial_interval_is_exact():
+    low, high = stats.binomial_ci(0, 10)
+    assert low == 0.0 and high == pytest.approx(1 - 0.025 ** 0.1, abs=1e-9)
+    low, high = stats.binomial_ci(10, 10)
+    assert high == 1.0 and low == pytest.approx(0.025 ** 0.1, abs=1e-9)
+
+
+def test_paired_verdicts_only_where_the_interval_excludes_zero():
+    rng = np.random.default_rng(0)
+    ref = [{"pair": str(i), "rms_slot_error_m": 0.3 + 0.05 * rng.standard_normal()}
+           for i in range(40)]
+    better = [{"pair": r["pair"], "rms_slot_error_m": r["rms_slot_error_m"] - 0.02} for r in ref]
+    noisy = [{"pair": r["pair"], "rms_slot_error_m": r["rms_slot_error_m"]
+              + 0.02 * rng.standard_normal()} for r in ref]
+    assert stats.paired(better, ref, "rms_slot_error_m")["verdict"] == "better"
+    worse = [{"pair": r["pair"], "rms_slot_error_m": r["rms_slot_error_m"] + 0.02} for r in ref]
+    assert stats.paired(worse, ref, "rms_slot_error_m")["verdict"] == "worse"
+    p = stats.paired(noisy, ref, "rms_slot_error_m")
+    assert p["verdict"] == "no difference shown" and p["low"] < 0.0 < p["high"]
+    m, low, high = stats.median_ci([r["rms_slot_error_m"] for r in ref])
+    assert low < m < high and high - low < 0.1
+
+
+def test_the_command_writes_its_outputs_and_rejects_a_bad_suite(tmp_path, capsys):
+    path = _suite(tmp_path)
+    assert main(["evaluate", str(path), "--out", str(tmp_path / "out"), "--workers", "1"]) == 0
+    printed = capsys.readouterr().out
+    assert "| lqr | 4 |" in printed and "Paired with `lqr`" in printed
+    names = {p.name for p in (tmp_path / "out").iterdir() if not p.name.startswith(".")}
+    assert {"episodes.csv", "summary.json", "summary.md", "slot_realistic_line.png"} <= names
+    assert not (tmp_path / "out" / PARTIAL).exists()
+    rows = (tmp_path / "out" / "episodes.csv").read_text().splitlines()
+    assert len(rows) == 1 + 8 and rows[0].startswith("episode,motion,group,side,sensing")
+    bad = _suite(tmp_path, SUITE.replace('"pid"', '"pdi"'), "bad.toml")
+    assert main(["evaluate", str(bad), "--out", str(tmp_path / "bad")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{bad}: controllers[1].name" in err[0]
+
+
+def test_every_shipped_suite_parses():
+    """The suites in suites/ expand without error (a checker over every shipped suite)."""
+    from pathlib import Path
+    folder = Path(__file__).resolve().parents[1] / "suites"
+    suites = sorted(folder.glob("*.toml"))
+    assert len(suites) >= 2
+    for path in suites:
+        suite = load_suite(path)
+        assert suite.episodes and suite.reference in {e.controller for e in suite.episodes}
