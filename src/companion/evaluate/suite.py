@@ -116,19 +116,22 @@ def load_suite(path: str | Path) -> Suite:
     faults = faults_from_list(data["faults"], f"{where}faults") if "faults" in data else ()
     motions = _motions(data.get("motions", {"scenarios": ["figure8"]}), path)
     episodes = []
-    for m, (motion, group, make) in enumerate(motions):
+    final: dict[tuple, Params] = {}     # validated once per group, controller, side, sensing
+    for m, (motion, group, base, build) in enumerate(motions):
         for side_name, bearing in sides:
             for sensing_name, sensing_params in sensing:
                 for seed in seeds:
                     episode_seed = _episode_seed(seed, m)
                     for label, name, overrides in controllers:
-                        spec = make(overrides, name)
-                        params = spec.params.replace(
-                            sensing=sensing_params,
-                            formation=dataclasses.replace(spec.params.formation,
-                                                          bearing=bearing))
+                        key = (group, label, side_name, sensing_name)
+                        if key not in final:
+                            p = base(label, overrides)
+                            final[key] = p.replace(
+                                sensing=sensing_params,
+                                formation=dataclasses.replace(p.formation, bearing=bearing))
+                        spec = build(label, overrides, name)
                         spec = dataclasses.replace(
-                            spec, params=params, seed=episode_seed,
+                            spec, params=final[key], seed=episode_seed,
                             duration=min(spec.duration, duration or math.inf),
                             obstacle_source=obstacles or spec.obstacle_source,
                             faults=spec.faults + tuple(faults))
@@ -187,28 +190,44 @@ def _controllers(items: Any, path: Path, digest: Any) -> list[tuple[str, str, di
     return out
 
 
-def _motions(data: Any, path: Path) -> list[tuple[str, str, Any]]:
-    """(name, group, make(overrides, controller) -> EpisodeSpec) per person motion."""
+def _motions(data: Any, path: Path) -> list[tuple[str, str, Any, Any]]:
+    """Per person motion: its name, its group, ``base(label, overrides) -> Params`` (the
+    motion's parameters with a controller's overrides) and ``build(label, overrides,
+    controller) -> EpisodeSpec``."""
     where = f"{path}: motions"
     if not isinstance(data, Mapping):
         raise ConfigError(f"{where}: expected a table with scenarios and/or tracks")
     reject_unknown(data, MOTIONS, f"{where}.")
-    out: list[tuple[str, str, Any]] = []
+    out: list[tuple[str, str, Any, Any]] = []
     for name in data.get("scenarios", []) and _list(data["scenarios"], f"{where}.scenarios"):
         scenario = _resolve(name, path) if str(name).endswith(".toml") else str(name)
         load_scenario(scenario)                           # its errors name the scenario
+        cache: dict[str, Any] = {}     # the scenario with a controller's overrides, by label
 
-        def make(over: dict, controller: str, scenario: str = scenario) -> EpisodeSpec:
-            return load_scenario(scenario, params_override=over or None).episode(controller)
+        def loaded(label: str, over: dict, scenario: str = scenario, cache: dict = cache):
+            if label not in cache:
+                cache[label] = load_scenario(scenario, params_override=over or None)
+            return cache[label]
 
-        out.append((Path(str(name)).stem, Path(str(name)).stem, make))
+        def base(label: str, over: dict, loaded=loaded) -> Params:
+            return loaded(label, over).params
+
+        def build(label: str, over: dict, controller: str, loaded=loaded) -> EpisodeSpec:
+            return loaded(label, over).episode(controller)
+
+        out.append((Path(str(name)).stem, Path(str(name)).stem, base, build))
     tracks = data.get("tracks")
     if tracks is not None:
         every = _count(data.get("every", 1), f"{where}.every")
+
+        def track_base(label: str, over: dict) -> Params:
+            return params_from_mapping(over)
+
         for label, person in _tracks(tracks, data, path)[::every]:
-            def make(over: dict, controller: str, person=person) -> EpisodeSpec:
-                return track_episode(person, params_from_mapping(over), controller)
-            out.append((label, "tracks", make))
+            def track_build(label: str, over: dict, controller: str,
+                            person=person) -> EpisodeSpec:
+                return EpisodeSpec(controller, person, Params(), person.duration)
+            out.append((label, "tracks", track_base, track_build))
     if not out:
         raise ConfigError(f"{where}: expected at least one scenario or track")
     return out
