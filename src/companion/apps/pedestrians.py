@@ -6,14 +6,14 @@ Any result on these tracks carries :data:`companion.data.pedestrians.CREDIT`.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from companion.data.pedestrians import Track
+from companion.evaluate.suite import track_episode
 from companion.metrics import compute
-from companion.params import SIDES, Params
+from companion.params import Params
 from companion.sim.recorded import DEFAULT_SMOOTHING, RecordedPerson
 from companion.sim.runner import EpisodeSpec, run_many
 from companion.types import Log
@@ -30,9 +30,7 @@ def episode(track: Track, params: Params, controller: str = "lqr", side: str = "
     """The track's person (:class:`~companion.sim.recorded.RecordedPerson`, not observed in
     its holes), the robot starting in its slot on ``side``, for the track's duration."""
     person = RecordedPerson(track.t, track.x, track.y, smoothing=smoothing)
-    params = params.replace(formation=dataclasses.replace(params.formation,
-                                                          bearing=SIDES[side]))
-    return EpisodeSpec(controller, person, params, person.duration, seed=seed)
+    return track_episode(person, params, controller, side, seed)
 
 
 def summary(log: Log) -> dict:
