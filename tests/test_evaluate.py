@@ -150,3 +150,34 @@ def test_every_shipped_suite_parses():
     for path in suites:
         suite = load_suite(path)
         assert suite.episodes and suite.reference in {e.controller for e in suite.episodes}
+
+
+def test_tuning_on_a_suite_improves_resumes_and_writes_a_params_file(tmp_path, capsys):
+    """Optuna on a two-episode suite: the first trial is the current gains, the best is no
+    worse, a second call on the same storage only adds the missing trials, and best.toml
+    loads as parameters with the tuned gains."""
+    pytest.importorskip("optuna")
+    from companion.params import load_params
+    path = _suite(tmp_path, SUITE.replace('controllers = ["lqr", "pid"]',
+                                          'controllers = ["pid"]')
+                  .replace('reference = "lqr"', "").replace("seeds = 2", "seeds = 1")
+                  .replace('sides = ["left", "right"]', 'sides = ["left"]'))
+    storage = f"sqlite:///{tmp_path / 'study.db'}"
+    args = ["tune", "pid", "--suite", str(path), "--storage", storage, "--workers", "1",
+            "--out", str(tmp_path / "out")]
+    assert main([*args, "--trials", "3"]) == 0
+    printed = capsys.readouterr().out
+    start, best = (float(x) for x in
+                   printed.split("J: current parameters ")[1].split(" (")[0].split(", best "))
+    assert best <= start
+    trials = (tmp_path / "out" / "trials.csv").read_text().splitlines()
+    assert len(trials) == 1 + 3
+    assert main([*args, "--trials", "4"]) == 0
+    assert "(4 trials)" in capsys.readouterr().out
+    assert len((tmp_path / "out" / "trials.csv").read_text().splitlines()) == 1 + 4
+    tuned = load_params(tmp_path / "out" / "best.toml")
+    text = (tmp_path / "out" / "best.toml").read_text()
+    assert f"kp_x = {tuned.pid.kp_x:.6g}" in text
+    assert main(["tune", "lqr", "--suite", str(path), "--trials", "1",
+                 "--out", str(tmp_path / "x")]) == 2
+    assert "controllers: expected 'lqr'" in capsys.readouterr().err

@@ -21,7 +21,7 @@ from companion.errors import CompanionError
 
 # Choices spelled out so that --help and usage errors need no numpy, numba or scipy (they
 # answer in well under 0.2 s); tests/test_cli.py checks them against the registries
-# (companion.control.CONTROLLERS, companion.apps.tune.SPACES, companion.params.SIDES).
+# (companion.control.CONTROLLERS, companion.evaluate.tuning.SPACES, companion.params.SIDES).
 CONTROLLERS = ("ic", "lqr", "lqr-paper", "lqr-tuned", "pid", "vsm")
 TUNABLE = ("ic", "lqr", "pid", "vsm")
 SIDES = ("behind", "front", "left", "right")
@@ -110,6 +110,16 @@ def parser() -> argparse.ArgumentParser:
     tn.add_argument("--seed", type=int, default=0, metavar="N",
                     help=f"random seed, {rng('--seed', 'N')} (default 0)")
     tn.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
+    tn.add_argument("--suite", metavar="FILE", help="tune with Optuna on this evaluation "
+                    "suite's episodes of the controller instead (docs/evaluation.md)")
+    tn.add_argument("--trials", type=int, default=40, metavar="N", help="with --suite: trials "
+                    f"in the study, {rng('--trials', 'N')} (default 40)")
+    tn.add_argument("--storage", metavar="URL", help="with --suite: Optuna storage that keeps "
+                    "the trials, e.g. sqlite:///study.db; a stopped study resumes from it")
+    tn.add_argument("--dask", metavar="ADDRESS", help="with --suite: run the episodes on Dask "
+                    "('local' or tcp://HOST:PORT)")
+    tn.add_argument("--out", metavar="DIR", help="with --suite: output folder for best.toml "
+                    "and trials.csv (default out/tune-CONTROLLER)")
     _workers(tn)
     _sensing(tn)
     tn.set_defaults(func="cmd_tune")

@@ -357,6 +357,9 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
 
 def cmd_tune(args: argparse.Namespace) -> int:
+    if args.suite:
+        from companion.apps.evaluation import cmd_tune_suite
+        return cmd_tune_suite(args)
     params = params_arg(args)
     checked_controllers([args.controller], params, args.params)
     budget, seed = int_arg(args.budget, "--budget"), seed_arg(args.seed)

@@ -12,13 +12,14 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from companion.apps.args import output_dir, workers_arg
+from companion.apps.args import UsageError, int_arg, output_dir, workers_arg
 from companion.apps.commands import progress_bar
 from companion.evaluate.report import write_episodes, write_summary
 from companion.evaluate.run import finish, run_suite
 from companion.evaluate.stats import summarize
 from companion.evaluate.suite import load_suite
-from companion.io import Outputs, save_figure
+from companion.evaluate.tuning import as_toml, tune_on_suite
+from companion.io import CsvWriter, Outputs, atomic_write, save_figure
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
@@ -41,6 +42,39 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     finish(out)
     print((out / "summary.md").read_text(encoding="utf-8"))
     print(f"wrote episodes.csv, summary.json, summary.md and the figures in {out}")
+    return 0
+
+
+def cmd_tune_suite(args: argparse.Namespace) -> int:
+    """``companion tune CONTROLLER --suite SUITE.toml``: Optuna on the suite's episodes."""
+    if args.params or args.sensing:
+        raise UsageError("--params, --sensing: with --suite the suite says the parameters "
+                         "and the sensing")
+    suite = load_suite(args.suite)
+    trials = int_arg(args.trials, "--trials")
+    out = output_dir(Path(args.out or Path("out") / f"tune-{args.controller}"))
+    n = sum(e.controller == args.controller for e in suite.episodes)
+    if not n:
+        raise UsageError(f"{args.suite}: controllers: expected {args.controller!r} among them")
+    print(f"tuning {args.controller} on {suite.name}: {trials} trials of {n} episodes, "
+          f"storage {args.storage or 'in memory'}")
+    with progress_bar(trials, "trial") as bar:
+        def progress(number: int, value: float) -> None:
+            bar(min(number + 1, trials))
+        tuned = tune_on_suite(suite, args.controller, trials, args.storage,
+                              workers=workers_arg(args), dask=args.dask, progress=progress)
+    with Outputs(out, "tune") as stage:
+        atomic_write(stage / "best.toml", lambda p: p.write_text(
+            f"# companion tune {args.controller} --suite {args.suite}: J {tuned.best_value:.4f} "
+            f"(current parameters {tuned.start_value:.4f})\n"
+            + as_toml(tuned.params, tuned.dims), encoding="utf-8"))
+        with CsvWriter(stage / "trials.csv", ["trial", "objective"]) as csv:
+            csv.add(tuned.history)
+    print(f"J: current parameters {tuned.start_value:.4f}, best {tuned.best_value:.4f} "
+          f"({tuned.trials} trials)")
+    for dim, value in zip(tuned.dims, tuned.best):
+        print(f"  {dim.name} = {value:.4g}")
+    print(f"wrote best.toml and trials.csv in {out}")
     return 0
 
 

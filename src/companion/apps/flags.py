@@ -50,6 +50,7 @@ FLAGS: dict[str, Bound] = {
     "--min-duration": Bound(0.0, MAX_DURATION, unit="s"),
     "--workers": WORKERS,
     "--budget": COUNT,
+    "--trials": COUNT,
     "--episodes": COUNT,
     "--seed": SEED,
     "--wait": Bound(0.0, 3600.0, True, "s"),

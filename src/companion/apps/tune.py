@@ -23,41 +23,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion import metrics
+from companion.evaluate.tuning import SPACES, Dim, apply, current
 from companion.params import Params
 from companion.sim.person import PersonMotion, Segment, SegmentPath, circle, line
 from companion.sim.runner import EpisodeSpec, run_many
 from companion.types import Pose
-
-
-@dataclass(frozen=True)
-class Dim:
-    """One tuned value: ``section.field`` (``index`` for tuple fields), searched log-uniformly
-    in [low, high]."""
-
-    section: str
-    field: str
-    low: float
-    high: float
-    index: int | None = None
-
-    @property
-    def name(self) -> str:
-        return f"{self.section}.{self.field}" + ("" if self.index is None else f"[{self.index}]")
-
-
-SPACES: dict[str, tuple[Dim, ...]] = {
-    "lqr": tuple(Dim("lqr", "q", 1.0, 300.0, i) for i in range(5))
-    + tuple(Dim("lqr", "r", 1.0, 300.0, i) for i in range(2)),
-    "pid": (Dim("pid", "kp_x", 0.2, 5.0), Dim("pid", "ki_x", 0.01, 2.0),
-            Dim("pid", "kd_x", 0.01, 1.0), Dim("pid", "kp_y", 0.2, 8.0),
-            Dim("pid", "ki_y", 0.01, 2.0), Dim("pid", "kd_y", 0.01, 1.0),
-            Dim("pid", "kp_theta", 0.2, 6.0)),
-    "vsm": (Dim("vsm", "stiffness", 0.2, 20.0), Dim("vsm", "damping", 0.1, 20.0),
-            Dim("vsm", "mass", 0.1, 5.0)),
-    "ic": tuple(Dim("impedance", f, lo, hi, i) for f, lo, hi in
-                (("mass", 0.1, 5.0), ("damping", 0.1, 20.0), ("stiffness", 0.2, 20.0))
-                for i in range(2)),
-}
 
 
 @dataclass(frozen=True)
@@ -82,28 +52,6 @@ def tuning_scenarios() -> list[TuningCase]:
         TuningCase("catch-up", line((0.0, 0.0, 0.0), 0.8), 25.0, Pose(-1.75, 1.0, 0.0),
                    0.5 * math.pi),
     ]
-
-
-def apply(params: Params, dims: Sequence[Dim], values: Sequence[float]) -> Params:
-    """``params`` with each ``dims[i]`` set to ``values[i]``."""
-    for dim, value in zip(dims, values):
-        section = getattr(params, dim.section)
-        current = getattr(section, dim.field)
-        if dim.index is not None:
-            current = tuple(value if i == dim.index else c for i, c in enumerate(current))
-        else:
-            current = float(value)
-        params = dataclasses.replace(
-            params, **{dim.section: dataclasses.replace(section, **{dim.field: current})})
-    return params
-
-
-def current(params: Params, dims: Sequence[Dim]) -> list[float]:
-    out = []
-    for dim in dims:
-        value = getattr(getattr(params, dim.section), dim.field)
-        out.append(float(value if dim.index is None else value[dim.index]))
-    return out
 
 
 def episodes(controller: str, params: Params, cases: Sequence[TuningCase]

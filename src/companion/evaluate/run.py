@@ -64,6 +64,15 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None, dask: str | N
             for e in suite.episodes]
 
 
+def run_episodes(specs: Sequence[EpisodeSpec], workers: int | None = None,
+                 dask: str | None = None) -> list[dict]:
+    """:func:`summary_row` of every spec, in order, on the backend of :func:`run_suite`."""
+    out: list = [None] * len(specs)
+    for i, result in _backend(dask, workers, specs):
+        out[i] = result
+    return out
+
+
 def finish(out: Path) -> None:
     """Forget the kept episodes once the outputs are written."""
     store = Path(out) / PARTIAL

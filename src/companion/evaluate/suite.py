@@ -32,7 +32,7 @@ from companion.sim.sensing import OBSTACLE_SOURCES
 
 TOP = ("name", "description", "reference", "seeds", "controllers", "sensing", "sides",
        "obstacles", "duration", "motions", "faults")
-MOTIONS = ("scenarios", "tracks", "every", "min_mean_speed", "min_duration")
+MOTIONS = ("scenarios", "tracks", "every", "offset", "min_mean_speed", "min_duration")
 CONTROLLER = ("name", "params", "label")
 #: The shipped walking tracks, by name.
 SHIPPED_TRACKS = "eth_ucy"
@@ -219,11 +219,15 @@ def _motions(data: Any, path: Path) -> list[tuple[str, str, Any, Any]]:
     tracks = data.get("tracks")
     if tracks is not None:
         every = _count(data.get("every", 1), f"{where}.every")
+        offset = data.get("offset", 0)
+        if isinstance(offset, bool) or not isinstance(offset, int) or not 0 <= offset < every:
+            raise ConfigError(f"{where}.offset: expected an integer in [0, every), got "
+                              f"{offset!r}")
 
         def track_base(label: str, over: dict) -> Params:
             return params_from_mapping(over)
 
-        for label, person in _tracks(tracks, data, path)[::every]:
+        for label, person in _tracks(tracks, data, path)[offset::every]:
             def track_build(label: str, over: dict, controller: str,
                             person=person) -> EpisodeSpec:
                 return EpisodeSpec(controller, person, Params(), person.duration)
