@@ -11,8 +11,10 @@ from companion.control import make_controller
 from companion.sim.gym_env import OBSERVATION, FollowEnv
 from companion.types import Command
 
-#: The observation is unbounded (positions in a world without walls); the checker notes it.
-pytestmark = pytest.mark.filterwarnings("ignore:.*Box observation space:UserWarning")
+#: The observation is unbounded (positions in a world without walls) and the action is in SI
+#: units (m/s, rad/s), not normalised to [-1, 1]; the checker notes both.
+pytestmark = [pytest.mark.filterwarnings("ignore:.*Box observation space:UserWarning"),
+              pytest.mark.filterwarnings("ignore:.*symmetric and normalized space:UserWarning")]
 
 
 @pytest.mark.parametrize("sensing", ["ideal", "realistic"])
