@@ -39,6 +39,12 @@ def _sensing(p: argparse.ArgumentParser) -> None:
                    "file of sensing keys (docs/sensing.md); default: the scenario's, else ideal")
 
 
+def _dask(p: argparse.ArgumentParser, when: str = "") -> None:
+    p.add_argument("--dask", metavar="ADDRESS", help=f"{when}run the episodes on Dask: 'local' "
+                   "starts a LocalCluster on 127.0.0.1, tcp://HOST:PORT uses a running "
+                   "scheduler (default: local worker processes)")
+
+
 def _workers(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, metavar="N",
                    help=f"worker processes for the episodes, {rng('--workers', 'N')} "
@@ -97,9 +103,7 @@ def parser() -> argparse.ArgumentParser:
     ev.add_argument("suite", help="suite TOML file (see suites/)")
     ev.add_argument("--out", metavar="DIR", help="output folder (default out/evaluate-NAME); "
                     "a killed run continues there on the next call")
-    ev.add_argument("--dask", metavar="ADDRESS", help="run on Dask: 'local' starts a "
-                    "LocalCluster on 127.0.0.1, tcp://HOST:PORT uses a running scheduler "
-                    "(default: local worker processes)")
+    _dask(ev)
     _workers(ev)
     ev.set_defaults(func="evaluation.cmd_evaluate")
 
@@ -116,8 +120,7 @@ def parser() -> argparse.ArgumentParser:
                     f"in the study, {rng('--trials', 'N')} (default 40)")
     tn.add_argument("--storage", metavar="URL", help="with --suite: Optuna storage that keeps "
                     "the trials, e.g. sqlite:///study.db; a stopped study resumes from it")
-    tn.add_argument("--dask", metavar="ADDRESS", help="with --suite: run the episodes on Dask "
-                    "('local' or tcp://HOST:PORT)")
+    _dask(tn, "with --suite: ")
     tn.add_argument("--out", metavar="DIR", help="with --suite: output folder for best.toml "
                     "and trials.csv (default out/tune-CONTROLLER)")
     _workers(tn)
