@@ -18,10 +18,10 @@ import argparse
 import dataclasses
 import time
 
-from companion.apps import fuzz as fuzz_app
-from companion.apps import pedestrians as walkers
 from companion.control import CONTROLLERS
 from companion.data import pedestrians
+from companion.evaluate import fuzz_runs as fuzz_app
+from companion.evaluate import walkers
 from companion.params import REALISTIC, Params
 from companion.sim import fuzz
 

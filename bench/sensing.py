@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import argparse
 
-from companion.apps import pedestrians as walkers
 from companion.control import CONTROLLERS
 from companion.data import pedestrians
+from companion.evaluate import walkers
 from companion.params import IDEAL, REALISTIC, Params
 
 #: The realistic-profile targets for the default LQR (median rho, median alpha, closest

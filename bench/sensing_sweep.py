@@ -30,9 +30,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from companion.apps import pedestrians as walkers
 from companion.control import CONTROLLERS
 from companion.data import pedestrians
+from companion.evaluate import walkers
 from companion.io import save_figure, write_csv
 from companion.params import REALISTIC, Params, SensingParams
 from companion.sim.runner import run_many

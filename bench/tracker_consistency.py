@@ -32,11 +32,10 @@ import sys
 import numpy as np
 from scipy.stats import chi2
 
-from companion.apps import pedestrians as walkers
-from companion.apps.args import file_params
 from companion.data import pedestrians
 from companion.errors import CompanionError
-from companion.params import IDEAL, REALISTIC, Params
+from companion.evaluate import walkers
+from companion.params import IDEAL, REALISTIC, Params, load_params
 from companion.sim import fuzz
 from companion.sim.recorded import RecordedPerson
 from companion.sim.runner import run_many
@@ -119,7 +118,7 @@ def main() -> None:
     ap.add_argument("--open-loop-only", action="store_true", help="skip the closed loop")
     args = ap.parse_args()
     try:
-        base = file_params(args)
+        base = load_params(args.params) if args.params else Params()
     except CompanionError as exc:
         sys.exit(f"tracker_consistency: {exc}")
     params = base.replace(sensing=REALISTIC) if base.sensing == IDEAL else base

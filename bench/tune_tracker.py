@@ -17,8 +17,8 @@ import dataclasses
 
 import optuna
 
-from companion.apps import pedestrians as walkers
 from companion.data import pedestrians
+from companion.evaluate import walkers
 from companion.params import REALISTIC, Params, TrackerParams
 
 #: Searched parameters: (low, high), on a log scale.

@@ -25,9 +25,9 @@ import pytest
 from hypothesis import strategies as st
 
 from companion.apps import benchmark, commands, reproduce, tune
-from companion.apps import pedestrians as walkers
 from companion.apps.cli import main
 from companion.data import pedestrians
+from companion.evaluate import walkers
 from companion.params import Params
 from companion.sim import soak
 from sweeps import QUICK, SLOW, assert_none_failed, sweep

@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 
 import companion
-from companion.apps.pedestrians import evaluate
 from companion.data.pedestrians import (
     CREDIT,
     ENV_VAR,
@@ -29,6 +28,7 @@ from companion.data.pedestrians import (
     select_tracks,
 )
 from companion.errors import DataError
+from companion.evaluate.walkers import evaluate
 from companion.params import Params, load_sensing
 
 SYNTHETIC = """\

@@ -11,15 +11,12 @@ import itertools
 import json
 import sys
 import time
-from collections.abc import Callable, Iterable, Iterator
-from contextlib import contextmanager, nullcontext
+from collections.abc import Iterable, Iterator
+from contextlib import nullcontext
 from pathlib import Path
-
-from tqdm import tqdm
 
 from companion import metrics
 from companion.apps import animate, benchmark, fuzz, movie, plots, reproduce, table3, tune
-from companion.apps import pedestrians as walkers
 from companion.apps.args import (
     UsageError,
     build_scenario,
@@ -37,11 +34,14 @@ from companion.apps.args import (
     workers_arg,
 )
 from companion.apps.logfile import LogCsv, Thinned, write_log
+from companion.apps.progress import progress_bar
 from companion.control import CONTROLLERS, lookup
 from companion.data import pedestrians
+from companion.evaluate import fuzz_runs, walkers
 from companion.io import Outputs, save_figure, write_csv, write_json
 from companion.params import Params
 from companion.sim import convergence, soak
+from companion.sim import fuzz as sim_fuzz
 from companion.sim.runner import run_many, stream_one
 from companion.sim.scenario import builtin_names, load_scenario
 from companion.types import Log
@@ -74,15 +74,6 @@ def split_lines(m: dict) -> list[str]:
             f"{m['safety_shift_m']:.3f} m in all, on {m['safety_share']:.1%} of the steps"]
 
 
-tqdm.monitor_interval = 0   # no monitor thread: the runner forks worker processes
-
-
-@contextmanager
-def progress_bar(total: int, unit: str) -> Iterator[Callable[[int], None]]:
-    """A progress bar on stderr, advanced by calling the yielded function with the number of
-    items done so far."""
-    with tqdm(total=total, unit=unit, file=sys.stderr) as bar:
-        yield lambda done: bar.update(done - bar.n)
 
 
 def started(blocks: Iterator[Log]) -> Iterator[Log]:
@@ -296,40 +287,40 @@ def cmd_fuzz(args: argparse.Namespace) -> int:
             raise UsageError("--replay: give the episode's controller and sensing as one "
                              "--controllers NAME and one --sensing NAME (fuzz.csv has them)")
         seed = int_arg(args.replay, "--replay", "SEED")
-        case, counts, log = fuzz.replay(seed, controllers[0], sensings[0], base, profiles)
+        case, counts, log = fuzz_runs.replay(seed, controllers[0], sensings[0], base, profiles)
         with Outputs(out, "fuzz-replay") as stage:
             write_log(stage / "log.csv", log)
             write_json(stage / "episode.json", {"case": vars(case), "counts": counts})
         print(json.dumps({"case": vars(case), "counts": counts}, indent=1))
         print(f"wrote log.csv, episode.json in {out}")
-        return 1 if fuzz.failed(counts) else 0
+        return 1 if sim_fuzz.failed(counts) else 0
     steps = int_arg(args.steps, "--steps", "N")
     seed = seed_arg(args.seed)
     workers = workers_arg(args)
     start = time.monotonic()
     print(f"fuzz: >= {steps:,} steps, seed {seed}, {', '.join(controllers)} x "
           f"{', '.join(sensings)} sensing")
-    episodes = fuzz.plan(steps, seed, controllers, sensings)
+    episodes = sim_fuzz.plan(steps, seed, controllers, sensings)
     with progress_bar(len(episodes), "episode") as progress:
-        cases, counts = fuzz.run(episodes, workers, progress, base, profiles)
-    pairs, total = fuzz.by_pair(cases, counts)
-    failed = fuzz.failures(cases, counts)
-    rates = fuzz.failure_rates(cases, counts)
+        cases, counts = fuzz_runs.run(episodes, workers, progress, base, profiles)
+    pairs, total = fuzz_runs.by_pair(cases, counts)
+    failed = fuzz_runs.failures(cases, counts)
+    rates = fuzz_runs.failure_rates(cases, counts)
     report = {"steps_requested": steps, "seed": seed, "params": args.params,
               "controllers": list(controllers),
               "sensing": list(sensings), "wall_time_s": round(time.monotonic() - start, 1),
               "total": total, "by_pair": pairs, "robot_failure_rate": rates, "failed": failed}
     with Outputs(out, "fuzz") as stage:
         write_json(stage / "fuzz.json", report)
-        write_csv(stage / "fuzz.csv", fuzz.COLUMNS, fuzz.csv_rows(cases, counts))
-    print(fuzz.table(pairs, total))
+        write_csv(stage / "fuzz.csv", fuzz_runs.COLUMNS, fuzz_runs.csv_rows(cases, counts))
+    print(fuzz_runs.table(pairs, total))
     for f in failed[:20]:
         print(f"FAIL seed {f['seed']} {f['controller']}/{f['sensing']}: replay with companion "
               f"fuzz --replay {f['seed']} --controllers {f['controller']} --sensing "
               f"{f['sensing']}")
     print(f"{len(failed)} of {len(cases)} episodes failed (a collision, a robot-caused "
           f"protective violation or a non-finite value); {report['wall_time_s']:g} s")
-    print(fuzz.rates_text(rates))
+    print(fuzz_runs.rates_text(rates))
     print(f"wrote fuzz.json, fuzz.csv in {out}")
     return 1 if failed else 0
 

@@ -13,7 +13,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
 from companion.apps.args import UsageError, int_arg, output_dir, workers_arg
-from companion.apps.commands import progress_bar
+from companion.apps.progress import progress_bar
 from companion.evaluate.report import write_episodes, write_summary
 from companion.evaluate.run import finish, run_suite
 from companion.evaluate.stats import summarize

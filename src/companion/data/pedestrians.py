@@ -6,7 +6,7 @@ tab separated: ``frame ped_id x y`` (frames and ids written as floats, x and y i
 ``frame / 25`` s and each pedestrian has one row every 0.4 s. Every scene has its own frame.
 
 Typical use: ``tracks = select_tracks(load_scenes())``;
-:func:`companion.apps.pedestrians.evaluate_tracks` runs the companion beside them.
+:func:`companion.evaluate.walkers.evaluate` runs the companion beside them.
 
 Any result computed on these data must carry the credit in :data:`CREDIT`.
 """
