@@ -12,7 +12,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from companion.apps.args import UsageError, int_arg, output_dir, workers_arg
+from companion.apps.args import UsageError, int_arg, output_dir, seed_arg, workers_arg
 from companion.apps.progress import progress_bar
 from companion.evaluate.report import write_episodes, write_summary
 from companion.evaluate.run import finish, run_suite
@@ -24,7 +24,8 @@ from companion.io import CsvWriter, Outputs, atomic_write, save_figure
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     suite = load_suite(args.suite)
-    out = output_dir(Path(args.out or Path("out") / f"evaluate-{suite.name}"))
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "-", suite.name).strip(".-") or "suite"
+    out = output_dir(Path(args.out or Path("out") / f"evaluate-{name}"))
     workers = workers_arg(args)
     controllers = list(dict.fromkeys(e.controller for e in suite.episodes))
     print(f"{suite.name}: {len(suite.episodes)} episodes ({', '.join(controllers)}; "
@@ -62,7 +63,8 @@ def cmd_tune_suite(args: argparse.Namespace) -> int:
         def progress(number: int, value: float) -> None:
             bar(min(number + 1, trials))
         tuned = tune_on_suite(suite, args.controller, trials, args.storage,
-                              workers=workers_arg(args), dask=args.dask, progress=progress)
+                              workers=workers_arg(args), dask=args.dask,
+                              seed=seed_arg(args.seed), progress=progress)
     with Outputs(out, "tune") as stage:
         atomic_write(stage / "best.toml", lambda p: p.write_text(
             f"# companion tune {args.controller} --suite {args.suite}: J {tuned.best_value:.4f} "

@@ -12,6 +12,13 @@ from companion.errors import ConfigError
 from companion.sim.runner import EpisodeSpec, default_workers
 
 
+def check_address(address: str) -> None:
+    """A ConfigError unless ``address`` is ``"local"`` or a scheduler address."""
+    if address != "local" and not address.startswith(("tcp://", "tls://", "ws://", "wss://")):
+        raise ConfigError(f"--dask: expected 'local' or a scheduler address such as "
+                          f"tcp://127.0.0.1:8786, got {address!r}")
+
+
 def run_dask(specs: Sequence[EpisodeSpec], address: str, workers: int | None,
              func: Callable[[EpisodeSpec], Any]) -> Iterator[tuple[int, Any]]:
     """``(index, func(spec))`` for every spec as each finishes on Dask. ``address``:
@@ -22,6 +29,7 @@ def run_dask(specs: Sequence[EpisodeSpec], address: str, workers: int | None,
         from distributed import Client, LocalCluster, as_completed
     except ImportError:
         raise ConfigError("--dask: needs dask.distributed (pip install -e '.[dask]')") from None
+    check_address(address)
     cluster = None
     with tempfile.TemporaryDirectory(prefix="companion-dask-") as scratch:
         if address == "local":
@@ -29,11 +37,12 @@ def run_dask(specs: Sequence[EpisodeSpec], address: str, workers: int | None,
                                    processes=True, host="127.0.0.1", dashboard_address=None,
                                    local_directory=scratch)
             client = Client(cluster)
-        elif address.startswith(("tcp://", "tls://", "ws://", "wss://")):
-            client = Client(address, timeout="30s")
         else:
-            raise ConfigError(f"--dask: expected 'local' or a scheduler address such as "
-                              f"tcp://127.0.0.1:8786, got {address!r}")
+            try:
+                client = Client(address, timeout="30s")
+            except (OSError, TimeoutError) as exc:
+                raise ConfigError(f"--dask: cannot reach the scheduler at {address}: "
+                                  f"{exc}") from None
         try:
             futures = client.map(func, list(specs), pure=False)
             index = {f.key: i for i, f in enumerate(futures)}

@@ -5,7 +5,7 @@ Results are kept in ``<out>/.evaluate.partial/episodes.jsonl``, one JSON line pe
 episode, appended and flushed to disk one at a time (a line cut short by a kill is ignored).
 The file's first line holds the suite's digest; a changed suite starts over. An episode's
 result depends on its spec alone, so the same suite gives the same results whatever the
-number or kind of workers.
+number or kind of workers (given the same companion and libraries on every worker).
 """
 
 from __future__ import annotations
@@ -48,6 +48,9 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None, dask: str | N
     numbers), in the suite's order; the episodes kept under ``out`` from an earlier call are
     not run again. ``dask``: None (local worker processes), ``"local"`` (a Dask LocalCluster
     on 127.0.0.1) or a scheduler address. ``progress(done, total)`` after each episode."""
+    if dask is not None:
+        from companion.evaluate.dask_backend import check_address
+        check_address(dask)
     store = Path(out) / PARTIAL / "episodes.jsonl"
     done = _load(store, suite.digest)
     todo = [e for e in suite.episodes if e.key not in done]

@@ -37,6 +37,25 @@ def median_ci(values: Sequence[float]) -> tuple[float, float, float]:
             float(res.confidence_interval.high))
 
 
+def median_sign_ci(values: Sequence[float]) -> tuple[float, float, float]:
+    """``(median, low, high)``: the median and its distribution-free 95 % interval from the
+    order statistics (the sign test's: at least 95 % coverage for any continuous
+    distribution). NaN bounds where no such interval exists (fewer than 6 values): too few
+    pairs to tell."""
+    x = np.sort([v for v in values if math.isfinite(v)])
+    n = len(x)
+    if n == 0:
+        return math.nan, math.nan, math.nan
+    # the largest k with P(B < k) <= 2.5 %, B ~ Binomial(n, 1/2): [x_(k), x_(n-k+1)]
+    k = int(stats.binom.ppf((1.0 - LEVEL) / 2.0, n, 0.5))
+    while k > 0 and stats.binom.cdf(k - 1, n, 0.5) > (1.0 - LEVEL) / 2.0:
+        k -= 1
+    median = float(np.median(x))
+    if k < 1:
+        return median, math.nan, math.nan
+    return median, float(x[k - 1]), float(x[n - k])
+
+
 def binomial_ci(k: int, n: int) -> tuple[float, float]:
     """The exact (Clopper-Pearson) 95 % interval of a share of ``k`` in ``n``."""
     if n == 0:
@@ -46,9 +65,10 @@ def binomial_ci(k: int, n: int) -> tuple[float, float]:
 
 
 def describe(rows: Sequence[dict], metric: str) -> dict:
-    """Median with its interval, 90th percentile and the worst value of ``metric`` over
-    ``rows`` (the worst: the largest where lower is better, else the smallest), with the key
-    of the episode that produced it."""
+    """Median with its interval, the 90th percentile towards the worse side (``p90``: the
+    10th percentile where higher is better) and the worst value of ``metric`` over ``rows``
+    (the largest where lower is better, else the smallest), with the key of the episode that
+    produced it."""
     finite = [r for r in rows if math.isfinite(r[metric])]
     median, low, high = median_ci([r[metric] for r in finite])
     out = {"median": median, "low": low, "high": high, "p90": math.nan, "worst": math.nan,
@@ -56,7 +76,8 @@ def describe(rows: Sequence[dict], metric: str) -> dict:
     if finite:
         lower_better = METRICS[metric]
         worst = (max if lower_better else min)(finite, key=lambda r: r[metric])
-        out.update(p90=float(np.percentile([r[metric] for r in finite], 90)),
+        out.update(p90=float(np.percentile([r[metric] for r in finite],
+                                           90 if lower_better else 10)),
                    worst=worst[metric], worst_episode=worst["episode"])
     return out
 
@@ -71,16 +92,17 @@ def safe_share(rows: Sequence[dict]) -> dict:
 
 def paired(rows: Sequence[dict], reference: Sequence[dict], metric: str) -> dict:
     """``rows`` against ``reference`` on the same episodes (matched by ``pair``): the median
-    difference (``rows`` minus ``reference``) with its interval, the share of pairs where
-    ``rows`` is better, and a verdict only where the interval excludes zero."""
+    difference (``rows`` minus ``reference``) with its distribution-free interval
+    (:func:`median_sign_ci`), the share of pairs where ``rows`` is better, and a verdict only
+    where the interval excludes zero."""
     ref = {r["pair"]: r[metric] for r in reference}
     diffs = [r[metric] - ref[r["pair"]] for r in rows
              if r["pair"] in ref and math.isfinite(r[metric]) and math.isfinite(ref[r["pair"]])]
-    median, low, high = median_ci(diffs)
+    median, low, high = median_sign_ci(diffs)
     lower_better = METRICS[metric]
     better = [d < 0.0 if lower_better else d > 0.0 for d in diffs]
     verdict = "no difference shown"
-    if math.isfinite(low) and (low > 0.0 or high < 0.0) and not low == high == 0.0:
+    if math.isfinite(low) and (low > 0.0 or high < 0.0):
         verdict = "better" if (high < 0.0) == lower_better else "worse"
     return {"pairs": len(diffs), "median_difference": median, "low": low, "high": high,
             "share_better": float(np.mean(better)) if better else math.nan,

@@ -27,7 +27,7 @@ from companion.params import SIDES, Params, load_sensing, params_from_mapping
 from companion.sim.faults import faults_from_list
 from companion.sim.recorded import RecordedPerson, load_person_csv
 from companion.sim.runner import EpisodeSpec
-from companion.sim.scenario import load_scenario
+from companion.sim.scenario import builtin_path, load_scenario
 from companion.sim.sensing import OBSTACLE_SOURCES
 
 TOP = ("name", "description", "reference", "seeds", "controllers", "sensing", "sides",
@@ -70,7 +70,8 @@ class Episode:
 @dataclass(frozen=True)
 class Suite:
     """A parsed suite file: its name, reference controller, episodes and a digest of every
-    file it read (a changed file invalidates kept results)."""
+    file it read, scenarios and tracks included (a changed file invalidates kept results; a
+    changed companion does not: give an updated companion a new output folder)."""
 
     name: str
     description: str
@@ -114,7 +115,7 @@ def load_suite(path: str | Path) -> Suite:
         raise ConfigError(f"{where}duration: expected a positive number of seconds, got "
                           f"{duration!r}")
     faults = faults_from_list(data["faults"], f"{where}faults") if "faults" in data else ()
-    motions = _motions(data.get("motions", {"scenarios": ["figure8"]}), path)
+    motions = _motions(data.get("motions", {"scenarios": ["figure8"]}), path, digest)
     episodes = []
     final: dict[tuple, Params] = {}     # validated once per group, controller, side, sensing
     for m, (motion, group, base, build) in enumerate(motions):
@@ -137,6 +138,11 @@ def load_suite(path: str | Path) -> Suite:
                             faults=spec.faults + tuple(faults))
                         episodes.append(Episode(motion, group, side_name, sensing_name, label,
                                                 seed, spec))
+    keys = [e.key for e in episodes]
+    if len(set(keys)) != len(keys):
+        twice = next(k for k in keys if keys.count(k) > 1)
+        raise ConfigError(f"{where}two episodes would be {twice!r}: a motion, side or sensing "
+                          f"named twice, or two files of one name")
     return Suite(str(data.get("name", path.stem)), str(data.get("description", "")), reference,
                  tuple(episodes), digest.hexdigest())
 
@@ -176,8 +182,11 @@ def _controllers(items: Any, path: Path, digest: Any) -> list[tuple[str, str, di
         overrides: dict = {}
         if "params" in item:
             file = _resolve(item["params"], path)
-            overrides = load_toml(file)
-            params_from_mapping(overrides, prefix=f"{file}: ")   # its errors name the file
+            try:
+                overrides = load_toml(file)
+                params_from_mapping(overrides, prefix=f"{file}: ")   # errors name the file
+            except ConfigError as exc:
+                raise ConfigError(f"{at}.params: {exc}") from None
             digest.update(Path(file).read_bytes())
         label = str(item.get("label", name if "params" not in item
                              else f"{name}+{Path(item['params']).stem}"))
@@ -190,7 +199,7 @@ def _controllers(items: Any, path: Path, digest: Any) -> list[tuple[str, str, di
     return out
 
 
-def _motions(data: Any, path: Path) -> list[tuple[str, str, Any, Any]]:
+def _motions(data: Any, path: Path, digest: Any) -> list[tuple[str, str, Any, Any]]:
     """Per person motion: its name, its group, ``base(label, overrides) -> Params`` (the
     motion's parameters with a controller's overrides) and ``build(label, overrides,
     controller) -> EpisodeSpec``."""
@@ -199,9 +208,15 @@ def _motions(data: Any, path: Path) -> list[tuple[str, str, Any, Any]]:
         raise ConfigError(f"{where}: expected a table with scenarios and/or tracks")
     reject_unknown(data, MOTIONS, f"{where}.")
     out: list[tuple[str, str, Any, Any]] = []
-    for name in data.get("scenarios", []) and _list(data["scenarios"], f"{where}.scenarios"):
+    scenarios = data.get("scenarios", []) and _list(data["scenarios"], f"{where}.scenarios")
+    for i, name in enumerate(scenarios):
         scenario = _resolve(name, path) if str(name).endswith(".toml") else str(name)
-        load_scenario(scenario)                           # its errors name the scenario
+        try:
+            load_scenario(scenario)                       # its errors name the scenario
+        except ConfigError as exc:
+            raise ConfigError(f"{where}.scenarios[{i}]: {exc}") from None
+        file = Path(scenario) if scenario.endswith(".toml") else builtin_path(scenario)
+        digest.update(file.read_bytes())
         cache: dict[str, Any] = {}     # the scenario with a controller's overrides, by label
 
         def loaded(label: str, over: dict, scenario: str = scenario, cache: dict = cache):
@@ -227,7 +242,7 @@ def _motions(data: Any, path: Path) -> list[tuple[str, str, Any, Any]]:
         def track_base(label: str, over: dict) -> Params:
             return params_from_mapping(over)
 
-        for label, person in _tracks(tracks, data, path)[offset::every]:
+        for label, person in _tracks(tracks, data, path, digest)[offset::every]:
             def track_build(label: str, over: dict, controller: str,
                             person=person) -> EpisodeSpec:
                 return EpisodeSpec(controller, person, Params(), person.duration)
@@ -237,13 +252,17 @@ def _motions(data: Any, path: Path) -> list[tuple[str, str, Any, Any]]:
     return out
 
 
-def _tracks(tracks: Any, data: Mapping, path: Path) -> list[tuple[str, RecordedPerson]]:
+def _tracks(tracks: Any, data: Mapping, path: Path, digest: Any
+            ) -> list[tuple[str, RecordedPerson]]:
+    """The named tracks (their data added to ``digest``)."""
     where = f"{path}: motions.tracks"
     if tracks == SHIPPED_TRACKS:
         chosen = pedestrians.select_tracks(
             pedestrians.load_scenes(), _number(data.get("min_mean_speed", 0.6),
                                                f"{path}: motions.min_mean_speed"),
             _number(data.get("min_duration", 15.0), f"{path}: motions.min_duration"))
+        for tr in chosen:
+            digest.update(np.asarray((tr.t, tr.x, tr.y), dtype=float).tobytes())
         return [(f"{tr.scene}/{tr.ped_id}", RecordedPerson(tr.t, tr.x, tr.y)) for tr in chosen]
     if not isinstance(tracks, str):
         raise ConfigError(f"{where}: expected {SHIPPED_TRACKS!r} or a folder of t,x,y CSV "
@@ -253,6 +272,8 @@ def _tracks(tracks: Any, data: Mapping, path: Path) -> list[tuple[str, RecordedP
     if not files:
         raise ConfigError(f"{where}: expected {SHIPPED_TRACKS!r} or a folder of t,x,y CSV "
                           f"files, got {tracks!r} (no CSV files there)")
+    for f in files:
+        digest.update(f.read_bytes())
     return [(f.stem, load_person_csv(f)) for f in files]
 
 

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from companion.errors import ConfigError
 from companion.evaluate.run import run_episodes
 from companion.evaluate.suite import Suite
 from companion.params import Params
@@ -125,18 +126,25 @@ def tune_on_suite(suite: Suite, controller: str, trials: int, storage: str | Non
     """Optuna's TPE sampler (seeded) over :data:`SPACES` for ``controller``, each trial the
     suite's episodes of that controller (its other controllers are ignored), until the study
     holds ``trials`` finished trials. ``progress(trial number, its J)`` after each."""
-    import optuna
-
+    try:
+        import optuna
+    except ImportError:
+        raise ConfigError("--suite: tuning needs optuna (pip install -e '.[tune]')") from None
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     dims = SPACES[controller]
     specs = [e.spec for e in suite.episodes if e.controller == controller]
     if not specs:
         raise ValueError(f"the suite has no episodes of {controller!r}")
     base = specs[0].params
-    study = optuna.create_study(study_name=study_name or f"companion-{controller}",
-                                storage=storage, load_if_exists=True, direction="minimize",
-                                sampler=optuna.samplers.TPESampler(seed=seed))
-    if not study.trials:
+    name = study_name or f"companion-{controller}-{suite.digest[:16]}"   # one study per suite
+    try:
+        study = optuna.create_study(study_name=name, storage=storage, load_if_exists=True,
+                                    direction="minimize",
+                                    sampler=optuna.samplers.TPESampler(seed=seed))
+    except Exception as exc:        # optuna raises many kinds for a bad storage URL
+        raise ConfigError(f"--storage: {exc}") from None
+    complete = optuna.trial.TrialState.COMPLETE
+    if not any(t.state == complete for t in study.trials):   # the current gains first
         study.enqueue_trial({d.name: v for d, v in zip(dims, current(base, dims))})
 
     def run(trial: Any) -> float:
@@ -152,12 +160,12 @@ def tune_on_suite(suite: Suite, controller: str, trials: int, storage: str | Non
             progress(trial.number, value)
         return value
 
-    done = sum(t.state.is_finished() for t in study.trials)
+    done = sum(t.state == complete for t in study.trials)
     if done < trials:
         study.optimize(run, n_trials=trials - done)
+    finished = [t for t in study.trials if t.state == complete]
     best = study.best_trial
     values = tuple(best.params[d.name] for d in dims)
-    start = study.trials[0].value if study.trials[0].value is not None else math.nan
-    history = tuple((t.number, float(t.value)) for t in study.trials if t.value is not None)
-    return Tuned(controller, dims, values, float(best.value), float(start),
-                 len(study.trials), apply(base, dims, values), history)
+    history = tuple((t.number, float(t.value)) for t in finished)
+    return Tuned(controller, dims, values, float(best.value), float(finished[0].value),
+                 len(finished), apply(base, dims, values), history)

@@ -21,7 +21,7 @@ import gymnasium as gym
 import numpy as np
 
 from companion.geometry import wrap_pi
-from companion.params import PROFILES
+from companion.params import load_sensing
 from companion.sim.episode import Simulator
 from companion.sim.scenario import load_scenario
 from companion.sim.sensing import make_perception
@@ -36,7 +36,8 @@ _SLOT, _CLEARANCE = LOG_COLUMNS.index("slot_error_m"), LOG_COLUMNS.index("rho_ob
 
 class FollowEnv(gym.Env):
     """Walk beside the person of a built-in ``scenario`` (or a scenario TOML file) under the
-    ``sensing`` profile (a name of :data:`companion.params.PROFILES`), with the scenario's
+    ``sensing`` profile (a name of :data:`companion.params.PROFILES` or a sensing TOML file),
+    with the scenario's
     obstacles known exactly (``obstacles="truth"``) or as the simulated LiDAR sees them."""
 
     metadata = {"render_modes": []}
@@ -44,7 +45,7 @@ class FollowEnv(gym.Env):
     def __init__(self, scenario: str = "figure8", sensing: str = "ideal",
                  obstacles: str | None = None, duration: float | None = None):
         sc = load_scenario(scenario)
-        self.params = sc.params.replace(sensing=PROFILES[sensing])
+        self.params = sc.params.replace(sensing=load_sensing(sensing))
         self.scenario = sc
         source = obstacles or sc.obstacle_source
         self._sim = Simulator(sc.person, self.params, duration or sc.duration, sc.start,

@@ -168,7 +168,7 @@ class PersonTracker:
         self._history = before
         self._apply(best, prior)
         for d in later:                       # re-filter what came after a late detection
-            self._apply(d, self._predicted(self._history[-1], d.t))
+            self._apply(d, self._predicted(self._history[-1], d.t), again=True)
         horizon = self._history[-1].t - self.params.max_delay_s
         self._history = [h for h in self._history if h.t >= horizon] or self._history[-1:]
 
@@ -193,12 +193,13 @@ class PersonTracker:
         """``base`` predicted to time ``t``."""
         return self._filter.predict(base.belief, t - base.t)
 
-    def _apply(self, d: PersonDetection, prior: Belief) -> None:
-        """Append the posterior of the ``prior`` at ``d``'s time updated with ``d``."""
+    def _apply(self, d: PersonDetection, prior: Belief, again: bool = False) -> None:
+        """Append the posterior of the ``prior`` at ``d``'s time updated with ``d`` (``again``:
+        a detection re-filtered after a late one, whose NIS was already reported)."""
         last = self._history[-1]
         scale = last.noise_scale
         nis = position_nis(prior.x, prior.p, d, self.params, scale=scale)
-        if math.isfinite(nis):
+        if math.isfinite(nis) and not again:
             self.innovations.append(nis)
         self._history.append(_Posterior(d.t, d, self._filter.update(prior, d, scale),
                                         self._inflation(last, d, nis),
