@@ -59,14 +59,20 @@ def test_reset_with_a_seed_repeats_the_episode_and_other_seeds_differ():
 
 def test_a_stalled_controller_holds_then_the_base_brakes():
     """No command from t = 2 s to 3.2 s: the last stays in force for the base's command
-    timeout (0.5 s; the log shows it held), then the base brakes at the deceleration limit."""
+    timeout (0.5 s; the log shows it held), then the base brakes at the deceleration limit,
+    logged as stopped: command_timeout with the command the base executes."""
     _, rows, _ = _by_hand(1)
     col = {name: np.array([r[0][i] for r in rows]) for i, name in enumerate(LOG_COLUMNS)}
+    reason = np.array([r[2] for r in rows])
     t, v, robot_v = col["t"], col["v"], col["robot_v"]
-    held = (t >= 2.0) & (t < 3.2)
+    timeout = P.robot.command_timeout_s
+    held = (t >= 2.0) & (t < 2.0 - P.dt + timeout - 1e-9)
     assert np.all(v[held] == v[np.argmax(held)]) and v[np.argmax(held)] > 0.5
-    braking = (t >= 2.6) & (t < 3.2)
-    assert np.all(np.diff(robot_v[braking]) < 0.0)
+    assert "command_timeout" not in set(reason[held])
+    braking = (t >= 2.0 - P.dt + timeout - 1e-9) & (t < 3.2)
+    assert set(reason[braking]) == {"command_timeout"}
+    assert np.all(np.diff(v[braking]) <= 0.0) and v[braking][-1] == 0.0
+    assert np.all(-np.diff(v[braking]) <= P.supervisor.decel_max * P.dt + 1e-12)
     assert robot_v[np.argmax(braking)] - robot_v[np.flatnonzero(braking)[-1]] > 0.1
 
 

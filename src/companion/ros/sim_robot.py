@@ -1,13 +1,13 @@
 """``companion sim-robot``: the simulator as a ROS 2 robot.
 
-The episode runs as ``companion run`` runs it (:func:`companion.sim.episode.run_episode`:
+The episode is the one ``companion run`` steps (:class:`companion.sim.episode.Simulator`:
 person, sensing model, LiDAR, actuator lag, the log), but the controller is on the wire:
-:class:`WireRobot` stands in the controller's place, publishes what the robot senses at
-each sample (/odom, /tf odom -> base_link, /scan, /person detections, /clock) and hands the
-plant the last /cmd_vel received. Like ros2_control's diff_drive_controller it brakes to a
-stop at the deceleration limits when no command came for ``robot.command_timeout_s``
-(status ``stopped``, reason ``command_timeout`` in the log; otherwise the log carries the
-node's last /companion/status).
+:class:`WireRobot` publishes what the robot senses at each sample (/odom, /tf odom ->
+base_link, /scan, /person detections, /clock) and hands the simulator the /cmd_vel received
+in the period, with the node's last /companion/status and estimate. Without one the
+simulator's base, like ros2_control's diff_drive_controller, keeps the last command for
+``robot.command_timeout_s`` and then brakes to a stop at the deceleration limits (logged as
+``stopped: command_timeout``).
 
 In lock step (``lockstep_s`` > 0, with /clock) each period waits for the node's answer to
 that period's /clock before the plant moves, as an in-process run does; docs/ros2.md.
@@ -27,7 +27,7 @@ from companion.ros import convert
 from companion.ros.convert import TimeBase
 from companion.ros.settings import RosParams
 from companion.ros.transport import DEFAULT, SENSOR_DATA, Qos, Transport
-from companion.sim.episode import run_episode, timed_out
+from companion.sim.episode import Simulator, drive
 from companion.sim.runner import EpisodeSpec
 from companion.sim.sensing import LidarPerception
 from companion.types import Command, Log, Observation, PersonEstimate
@@ -61,9 +61,8 @@ class Pacer:
 
 
 class WireRobot:
-    """A controller in the episode's loop that is really a ROS 2 robot's interface."""
-
-    takes_detections = True
+    """A ROS 2 robot's interface to a node: :meth:`step` publishes a sample and returns the
+    node's command of the period, if one came."""
 
     def __init__(self, transport: Transport, ros: RosParams, params: Params, pacer: Pacer,
                  epoch_ns: int | None = SIM_EPOCH_NS,
@@ -133,14 +132,9 @@ class WireRobot:
         return False
 
     def reset(self) -> None:
-        self._base = (0.0, 0.0)
-        self._last_cmd_t = 0.0
         self._last_scan = None
 
-    def applied(self, cmd: Command) -> None:
-        self._base = (cmd.v, cmd.omega)
-
-    def step(self, obs: Observation) -> Command:
+    def step(self, obs: Observation) -> Command | None:
         self.pacer.wait(obs.t)
         if self.time is None:
             self.time = TimeBase(time.time_ns() - int(round(obs.t * 1e9)))
@@ -176,12 +170,7 @@ class WireRobot:
                                     self.lockstep_s)
             received, self._received = self._received, None
             status, estimate = self._status, self._estimate
-        if received is not None:
-            self._base, self._last_cmd_t = received, obs.t
-        elif obs.t - self._last_cmd_t >= self.params.robot.command_timeout_s - 1e-9:
-            self._base = timed_out(self._base, self.params)
-            status = ("stopped", "command_timeout")
-        return Command(*self._base, 0.0, *status, estimate)
+        return None if received is None else Command(*received, 0.0, *status, estimate)
 
 
 def measured_type(params: Params) -> str:
@@ -206,8 +195,6 @@ def run_sim_robot(spec: EpisodeSpec, transport: Transport, ros: RosParams, pacer
     robot = WireRobot(transport, ros, spec.params, pacer, epoch_ns, after, lockstep_s)
     if wait_s > 0.0:
         robot.wait_for_node(wait_s)
-    log = run_episode(robot, spec.person, spec.params, spec.duration, start=spec.start,
-                      seed=spec.seed, obstacles=spec.obstacles,
-                      perception=LidarPerception(spec.params), faults=spec.faults,
-                      start_velocity=spec.start_velocity)
-    return log, robot
+    sim = Simulator(spec.person, spec.params, spec.duration, spec.start, spec.obstacles,
+                    LidarPerception(spec.params), spec.faults, spec.start_velocity)
+    return Log.concat(drive(sim, robot.step, spec.seed)), robot

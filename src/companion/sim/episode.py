@@ -16,7 +16,7 @@ deterministic for a given seed.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -142,25 +142,42 @@ def episode_blocks(controller: Controller, person: PersonMotion, params: Params,
     Raises
     ------
     ConfigError
-        At the first block, for a duration shorter than one period or sensing the controller
-        cannot use.
+        For a duration shorter than one period or sensing the controller cannot use.
     """
     detections = getattr(controller, "takes_detections", False)
     sim = Simulator(person, params, duration, start, obstacles, perception, faults,
                     start_velocity, detections)
-    if rows < 1:
-        raise ConfigError(f"rows: expected a block of at least one row, got {rows}")
     if not detections and params.sensing != IDEAL:
         raise ConfigError("sensing: a controller without the standard stack sees the true "
                           "person state, which needs ideal sensing")
-    controller.reset()
+
+    def started(sim: Simulator) -> None:
+        controller.reset()
+        if sim.start_velocity is not None:
+            controller.applied(Command(*sim.start_velocity))
+
+    return drive(sim, controller.step, seed, rows, started)
+
+
+def drive(sim: Simulator, act: Callable[[Observation], Command | None], seed: int = 0,
+          rows: int = BLOCK_ROWS, started: Callable[[Simulator], None] | None = None
+          ) -> Iterator[Log]:
+    """Run ``sim`` from ``reset(seed)`` (then ``started(sim)``) to its end, asking ``act``
+    for each sample's command (None: none came), except while a stall fault is active, and
+    yield the log in blocks of ``rows`` rows."""
+    if rows < 1:
+        raise ConfigError(f"rows: expected a block of at least one row, got {rows}")
+    return _drive(sim, act, seed, rows, started)
+
+
+def _drive(sim: Simulator, act: Callable[[Observation], Command | None], seed: int,
+           rows: int, started: Callable[[Simulator], None] | None) -> Iterator[Log]:
     obs = sim.reset(seed)
-    if sim.start_velocity is not None:
-        controller.applied(Command(*sim.start_velocity))
+    if started is not None:
+        started(sim)
     block = _Block(min(rows, sim.steps))
     while obs is not None:
-        # a stalled controller is not called: the last command stays in force
-        obs = sim.step(None if sim.stalled else controller.step(obs))
+        obs = sim.step(None if sim.stalled else act(obs))
         block.add(*sim.row)
         if block.full() or obs is None:
             yield block.log()
@@ -244,9 +261,10 @@ class Simulator:
 
     def step(self, command: Command | None) -> Observation | None:
         """Apply ``command`` from the current sample on (None: no new command, as from a
-        stalled controller: the last one stays in force until the base's command timeout,
-        then the base brakes); record :attr:`row`; advance one period. The next observation,
-        or None after the last sample."""
+        stalled controller or a silent node: the last one stays in force until the base's
+        command timeout, then the base brakes, logged as ``stopped: command_timeout``);
+        record :attr:`row`; advance one period. The next observation, or None after the last
+        sample."""
         if self.row is not None and self.k >= self.steps:
             raise RuntimeError("step: the episode is over; reset() starts it again")
         p, f, d = self.params, self.params.formation, self.params.robot.d
@@ -255,6 +273,8 @@ class Simulator:
             self._cmd, self._base, self._last_command = command, (command.v, command.omega), t
         elif t - self._last_command >= p.robot.command_timeout_s - 1e-9:
             self._base = timed_out(self._base, p)
+            self._cmd = Command(*self._base, 0.0, "stopped", "command_timeout",
+                                self._cmd.estimate)
         cmd = self._cmd
         e = cmd.estimate
         if e is not None and self.detections:
