@@ -212,3 +212,23 @@ def test_tuning_on_a_suite_improves_resumes_and_writes_a_params_file(tmp_path, c
     assert main(["tune", "lqr", "--suite", str(path), "--trials", "1",
                  "--out", str(tmp_path / "x")]) == 2
     assert "controllers: expected 'lqr'" in capsys.readouterr().err
+
+
+def test_the_tracker_is_tuned_on_a_suite_with_the_same_study(tmp_path):
+    """The tracker's settings go through the same Optuna study as the gains: the first
+    trial is the current settings, every trial stays in the search box, and the best are
+    valid parameters."""
+    pytest.importorskip("optuna")
+    from companion.evaluate.tuning import TRACKER_SPACE, current, tune_on_suite
+    from companion.params import Params
+    path = _suite(tmp_path, SUITE.replace('controllers = ["lqr", "pid"]',
+                                          'controllers = ["lqr"]').replace("seeds = 2",
+                                                                           "seeds = 1")
+                  .replace('sides = ["left", "right"]', 'sides = ["left"]'))
+    tuned = tune_on_suite(load_suite(path), "lqr", 2, workers=1, dims=TRACKER_SPACE)
+    assert tuned.trials == 2 and len(tuned.history) == 2
+    assert tuned.history[0][1] == tuned.start_value
+    values = current(tuned.params, TRACKER_SPACE)
+    assert all(d.low <= v <= d.high for d, v in zip(TRACKER_SPACE, values))
+    assert tuned.best_value == min(j for _, j in tuned.history)
+    assert current(Params(), TRACKER_SPACE) != values or tuned.best_value == tuned.start_value

@@ -53,6 +53,15 @@ SPACES: dict[str, tuple[Dim, ...]] = {
                 for i in range(2)),
 }
 
+#: The person tracker's process noises and switching rates (``bench/tune_tracker.py`` tunes
+#: them on a suite's episodes of the default LQR).
+TRACKER_SPACE: tuple[Dim, ...] = (
+    Dim("tracker", "accel_std", 0.1, 1.5), Dim("tracker", "turn_accel_std", 0.1, 3.0),
+    Dim("tracker", "maneuver_accel_std", 0.5, 5.0),
+    Dim("tracker", "maneuver_turn_accel_std", 0.3, 6.0),
+    Dim("tracker", "maneuver_start_rate", 0.05, 5.0),
+    Dim("tracker", "maneuver_end_rate", 0.2, 10.0))
+
 #: The objective's weights: metres of slot error per radian of bearing error, and the metres
 #: added per unsafe episode.
 ALPHA_WEIGHT = 0.25
@@ -122,21 +131,24 @@ class Tuned:
 def tune_on_suite(suite: Suite, controller: str, trials: int, storage: str | None = None,
                   study_name: str | None = None, workers: int | None = None,
                   dask: str | None = None, seed: int = 0,
-                  progress: Callable[[int, float], None] | None = None) -> Tuned:
-    """Optuna's TPE sampler (seeded) over :data:`SPACES` for ``controller``, each trial the
-    suite's episodes of that controller (its other controllers are ignored), until the study
-    holds ``trials`` finished trials. ``progress(trial number, its J)`` after each."""
+                  progress: Callable[[int, float], None] | None = None,
+                  dims: Sequence[Dim] | None = None) -> Tuned:
+    """Optuna's TPE sampler (seeded) over ``dims`` (default: :data:`SPACES` of
+    ``controller``), each trial the suite's episodes of that controller (its other
+    controllers are ignored), until the study holds ``trials`` finished trials.
+    ``progress(trial number, its J)`` after each."""
     try:
         import optuna
     except ImportError:
         raise ConfigError("--suite: tuning needs optuna (pip install -e '.[tune]')") from None
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    dims = SPACES[controller]
+    dims = tuple(dims or SPACES[controller])
     specs = [e.spec for e in suite.episodes if e.controller == controller]
     if not specs:
         raise ValueError(f"the suite has no episodes of {controller!r}")
     base = specs[0].params
-    name = study_name or f"companion-{controller}-{suite.digest[:16]}"   # one study per suite
+    space = "-".join(dict.fromkeys(d.section for d in dims))
+    name = study_name or f"companion-{controller}-{space}-{suite.digest[:16]}"  # per suite
     try:
         study = optuna.create_study(study_name=name, storage=storage, load_if_exists=True,
                                     direction="minimize",
