@@ -52,12 +52,12 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None, dask: str | N
         from companion.evaluate.dask_backend import check_address
         check_address(dask)
     store = Path(out) / PARTIAL / "episodes.jsonl"
-    done = _load(store, suite.digest)
+    kept, done = _load(store, suite.digest)
     todo = [e for e in suite.episodes if e.key not in done]
     total = len(suite.episodes)
     if progress:
         progress(total - len(todo), total)
-    with _Appender(store, suite.digest) as keep:
+    with _Appender(store, suite.digest, fresh=not kept) as keep:
         for n, (i, result) in enumerate(_backend(dask, workers, [e.spec for e in todo]), 1):
             done[todo[i].key] = result
             keep(todo[i].key, result)
@@ -95,17 +95,17 @@ def _backend(dask: str | None, workers: int | None, specs: Sequence[EpisodeSpec]
     return run_dask(specs, dask, workers, summary_row)
 
 
-def _load(store: Path, digest: str) -> dict[str, dict]:
-    """The results kept for a suite of ``digest`` (none if the store is for another)."""
+def _load(store: Path, digest: str) -> tuple[bool, dict[str, dict]]:
+    """Whether ``store`` belongs to the suite of ``digest``, and the results kept there."""
     if not store.exists():
-        return {}
+        return False, {}
     lines = store.read_text(encoding="utf-8").splitlines()
     try:
         header = json.loads(lines[0]) if lines else {}
     except json.JSONDecodeError:
-        return {}
+        return False, {}
     if header.get("digest") != digest:
-        return {}
+        return False, {}
     out = {}
     for line in lines[1:]:
         try:
@@ -113,18 +113,19 @@ def _load(store: Path, digest: str) -> dict[str, dict]:
         except json.JSONDecodeError:       # the last line of a killed run: run it again
             continue
         out[item["key"]] = item["result"]
-    return out
+    return True, out
 
 
 class _Appender:
-    """Appends one JSON line per result to the store, flushed and synced each time."""
+    """Appends one JSON line per result to the store, flushed and synced each time; a
+    ``fresh`` store (none, or another suite's) is started over with the digest."""
 
-    def __init__(self, store: Path, digest: str):
-        self.store, self.digest = store, digest
+    def __init__(self, store: Path, digest: str, fresh: bool):
+        self.store, self.digest, self.fresh = store, digest, fresh
 
     def __enter__(self) -> Callable[[str, dict], None]:
         self.store.parent.mkdir(parents=True, exist_ok=True)
-        fresh = not self.store.exists() or not _load_header_ok(self.store, self.digest)
+        fresh = self.fresh
         if not fresh:                       # drop a line a kill cut short
             data = self.store.read_bytes()
             if not data.endswith(b"\n"):
@@ -142,13 +143,3 @@ class _Appender:
 
     def __exit__(self, *exc: object) -> None:
         self._file.close()
-
-
-def _load_header_ok(store: Path, digest: str) -> bool:
-    with open(store, encoding="utf-8") as f:
-        first = f.readline()
-    try:
-        return json.loads(first).get("digest") == digest
-    except json.JSONDecodeError:
-        return False
-

@@ -8,7 +8,7 @@ after ``lost_after_s`` s without one, or when its position grows too uncertain, 
 lost, and a new track needs ``reacquire_time_s`` s of consistent detections. Detections that
 give no covariance take the declared sensing's noise; the position variance is then scaled,
 within bounds, by how far the detections fall from the prediction on average (a detector
-noisier or quieter than it declares). While detections fall farther from the prediction than
+noisier than it declares). While detections fall farther from the prediction than
 the filter expects (a manoeuvre its models did not foresee), the reported position covariance
 is widened to match. An exact full-state detection
 (all stds 0, an ideal sensor) sets the state exactly. docs/sensing.md explains the choices.
