@@ -22,7 +22,8 @@ from companion.control import CONTROLLERS
 from companion.data import pedestrians
 from companion.evaluate import fuzz_runs as fuzz_app
 from companion.evaluate import walkers
-from companion.params import REALISTIC, Params
+from companion.evaluate.run import run_all
+from companion.params import Params
 from companion.sim import fuzz
 
 
@@ -44,7 +45,9 @@ def main() -> None:
         t0 = time.perf_counter()
         base = Params()
         base = base.replace(keepout=dataclasses.replace(base.keepout, collision_risk=risk))
-        rows = walkers.evaluate(tracks, base.replace(sensing=REALISTIC), ["lqr"])
+        lqr = {"name": "lqr", "label": "lqr",
+               "params": {"keepout": {"collision_risk": risk}}}
+        rows = run_all(walkers.tracks_suite([lqr], ["realistic"], every=args.every))
         w = walkers.table(rows)["lqr"]
         cases, counts = fuzz_app.run(episodes, None, base=base)
         rate = fuzz_app.failure_rates(cases, counts)["realistic"]

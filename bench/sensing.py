@@ -19,7 +19,7 @@ import argparse
 from companion.control import CONTROLLERS
 from companion.data import pedestrians
 from companion.evaluate import walkers
-from companion.params import IDEAL, REALISTIC, Params
+from companion.evaluate.run import run_all
 
 #: The realistic-profile targets for the default LQR (median rho, median alpha, closest
 #: approach): (key, bound, at most?).
@@ -31,11 +31,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--every", type=int, default=1, help="take every N-th track")
     args = ap.parse_args()
-    tracks = pedestrians.select_tracks(pedestrians.load_scenes())[::args.every]
-    names = list(CONTROLLERS)
-    print(f"{len(tracks)} tracks x 2 sides x {len(names)} controllers")
-    for label, sensing in (("ideal", IDEAL), ("realistic", REALISTIC)):
-        rows = walkers.evaluate(tracks, Params(sensing=sensing), names, ("left", "right"))
+    suite = walkers.tracks_suite(list(CONTROLLERS), ["ideal", "realistic"], every=args.every)
+    print(f"{len(suite.episodes)} episodes: every shipped track x 2 sides x "
+          f"{len(CONTROLLERS)} controllers x 2 sensing profiles")
+    every = run_all(suite)
+    for label in ("ideal", "realistic"):
+        rows = [r for r in every if r["sensing"] == label]
         table = walkers.table(rows)
         print(f"\n{label}: {'controller':10s} {'median rho cm':>13s} {'p90 rho cm':>10s} "
               f"{'median alpha':>12s} {'closest m':>9s}")

@@ -1,5 +1,7 @@
 """How companionship degrades with the detector: the default LQR on the shipped walking tracks
-under detectors varied one axis at a time around ``realistic`` (docs/sensing.md).
+under detectors varied one axis at a time around ``realistic`` (the shipped suite
+``sensing-sweep``), and the other controllers on three of its cells (``sensing-corners``)
+(docs/sensing.md).
 
     python bench/sensing_sweep.py [--every N] [--out DIR] [--workers N]
 
@@ -19,7 +21,6 @@ About 25 minutes on 2 cores with every track; ``--every 3`` about 9.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 import time
 from pathlib import Path
@@ -30,58 +31,27 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from companion.control import CONTROLLERS
+from companion.config import load_toml
 from companion.data import pedestrians
-from companion.evaluate import walkers
+from companion.evaluate.run import run_episodes
+from companion.evaluate.suite import Suite, suite_from_mapping, suite_path
 from companion.io import save_figure, write_csv
-from companion.params import REALISTIC, Params, SensingParams
-from companion.sim.runner import run_many
-
-#: One-axis variations around realistic: (axis label, value label, sensing keys).
-AXES = (
-    [("rate", f"{hz:g} Hz", {"person_rate_hz": hz}) for hz in (5.0, 20.0)]
-    + [("noise", f"{m:g} m", {"person_position_noise_m": m}) for m in (0.02, 0.10)]
-    + [("latency", f"{s:g} s", {"person_latency_s": s}) for s in (0.05, 0.2)]
-    + [("base lag", f"{s:g} s", {"actuator_tau_s": s}) for s in (0.1, 0.3)]
-    + [("heading", "measured", {"person_heading_noise_rad": 0.1})])
-WORSE = {"person_rate_hz": 5.0, "person_position_noise_m": 0.10, "person_latency_s": 0.2,
-         "actuator_tau_s": 0.3}
-BETTER = {"person_rate_hz": 20.0, "person_position_noise_m": 0.02, "person_latency_s": 0.05,
-          "actuator_tau_s": 0.1, "person_heading_noise_rad": 0.1}
-#: Within 25 % of realistic on every axis: a detector a new user may well have.
-NEAR = {"person_rate_hz": 8.0, "person_position_noise_m": 0.0625, "person_latency_s": 0.125,
-        "actuator_tau_s": 0.25}
 
 COLUMNS = ("controller", "cell", "runs", "median_slot_m", "p90_slot_m", "median_floor_m",
            "ratio", "median_rho_m", "median_alpha_rad", "closest_m")
 
 
-def cells() -> list[tuple[str, str, SensingParams]]:
-    """``(controller, cell label, sensing)`` of the sweep."""
-    out = [("lqr", "realistic", REALISTIC)]
-    out += [("lqr", f"{axis} {label}", dataclasses.replace(REALISTIC, **keys))
-            for axis, label, keys in AXES]
-    corners = [("all worse", dataclasses.replace(REALISTIC, **WORSE)),
-               ("all better", dataclasses.replace(REALISTIC, **BETTER)),
-               ("near realistic (+25 %)", dataclasses.replace(REALISTIC, **NEAR))]
-    out += [("lqr", label, s) for label, s in corners]
-    for name in CONTROLLERS:
-        if name != "lqr":
-            out += [(name, "realistic", REALISTIC)] + [(name, label, s)
-                                                       for label, s in corners[:2]]
-    return out
-
-
-def summary(log) -> dict:
-    m = walkers.summary(log)
-    return {k: m[k] for k in ("rms_slot_error_m", "rms_estimate_error_m", "rmse_rho_m",
-                              "rmse_alpha_rad", "min_person_distance_m")}
+def load(name: str, every: int) -> Suite:
+    """The shipped suite ``name`` on every ``every``-th track."""
+    data = load_toml(suite_path(name))
+    data["motions"]["every"] = every
+    return suite_from_mapping(data, suite_path(name))
 
 
 def row(controller: str, label: str, runs: list[dict]) -> list:
     slot = np.array([r["rms_slot_error_m"] for r in runs])
-    floor = np.array([r["rms_estimate_error_m"] for r in runs if r["rms_estimate_error_m"]
-                      is not None])
+    floor = np.array([r["rms_estimate_error_m"] for r in runs
+                      if math.isfinite(r["rms_estimate_error_m"])])
     return [controller, label, len(runs), float(np.median(slot)),
             float(np.percentile(slot, 90)), float(np.median(floor)),
             float(np.median(slot) / np.median(floor)),
@@ -139,23 +109,17 @@ def main() -> None:
         args.out.mkdir(parents=True, exist_ok=True)
         plot_csv(args.plot, args.out / "sweep.png")
         return
-    tracks = pedestrians.select_tracks(pedestrians.load_scenes())[::args.every]
-    plan = cells()
-    print(f"{len(plan)} cells x {len(tracks)} tracks x 2 sides")
-    specs, keys = [], []
-    for controller, label, sensing in plan:
-        for i, track in enumerate(tracks):
-            for side in ("left", "right"):
-                specs.append(walkers.episode(track, Params(sensing=sensing), controller, side,
-                                             seed=i))
-                keys.append((controller, label))
+    sweep, corners = load("sensing-sweep", args.every), load("sensing-corners", args.every)
+    episodes = [e for e in corners.episodes if e.controller != "lqr"]   # lqr: in the sweep
+    print(f"{len(sweep.episodes)} + {len(episodes)} episodes (the sensing-sweep suite, the "
+          f"other controllers of sensing-corners)")
     t0 = time.perf_counter()
-    results = run_many(specs, args.workers, summarize=summary)
+    results = run_episodes([e.spec for e in sweep.episodes + tuple(episodes)], args.workers)
     grouped: dict[tuple[str, str], list[dict]] = {}
-    for key, r in zip(keys, results):
-        grouped.setdefault(key, []).append(r)
-    rows = [row(c, label, grouped[(c, label)]) for c, label, _ in plan]
-    print(f"{len(specs)} runs in {time.perf_counter() - t0:.0f} s\n")
+    for e, r in zip(sweep.episodes + tuple(episodes), results):
+        grouped.setdefault((e.controller, e.sensing), []).append(r)
+    rows = [row(c, label, runs) for (c, label), runs in grouped.items()]
+    print(f"{len(results)} runs in {time.perf_counter() - t0:.0f} s\n")
     print(f"{'controller':10s} {'cell':24s} {'slot cm':>8s} {'p90':>6s} {'floor':>6s} "
           f"{'ratio':>6s} {'rho cm':>7s} {'alpha':>6s} {'closest':>7s}")
     for r in rows:

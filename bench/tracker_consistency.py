@@ -27,6 +27,7 @@ larger share means the tracker is overconfident on that kind of walker.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 
 import numpy as np
@@ -127,7 +128,9 @@ def main() -> None:
                  [open_loop(t, params, seed) for seed, t in enumerate(tracks)])
     if args.open_loop_only:
         return
-    specs = [walkers.episode(t, params, side=side) for t in tracks for side in ("left", "right")]
+    suite = walkers.tracks_suite(["lqr"], ["realistic"], every=args.every)
+    specs = [dataclasses.replace(e.spec, params=params.replace(
+        formation=e.spec.params.formation)) for e in suite.episodes]
     report(f"ETH/UCY walkers ({len(specs)} runs)", run_many(specs, summarize=errors))
     drawn = [fuzz.draw(seed, "lqr", "realistic", base) for seed in range(args.episodes)]
     report(f"fuzz walkers ({args.episodes} episodes)",

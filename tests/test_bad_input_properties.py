@@ -24,10 +24,9 @@ from pathlib import Path
 import pytest
 from hypothesis import strategies as st
 
-from companion.apps import benchmark, commands, reproduce, tune
+from companion.apps import benchmark, commands, evaluation, reproduce, suites
 from companion.apps.cli import main
 from companion.data import pedestrians
-from companion.evaluate import walkers
 from companion.params import Params
 from companion.sim import soak
 from sweeps import QUICK, SLOW, assert_none_failed, sweep
@@ -43,8 +42,9 @@ def _work(*args, **kwargs):
 
 @pytest.fixture
 def no_work(monkeypatch):
-    for owner, name in [(commands, "stream_one"), (commands, "run_many"), (soak, "run_soak"),
-                        (tune, "tune"), (benchmark, "run"), (walkers, "evaluate"),
+    for owner, name in [(commands, "stream_one"), (soak, "run_soak"),
+                        (evaluation, "load_suite"), (benchmark, "run"),
+                        (suites, "suite_from_mapping"), (suites, "evaluate"),
                         (reproduce, "reproduce"), (pedestrians, "load_scenes")]:
         monkeypatch.setattr(owner, name, _work)
 
@@ -387,7 +387,7 @@ FLAGS = [
     (["pedestrians"], "--workers", WORKERS),
     (["soak"], "--duration", DURATION),
     (["soak", "--duration", "1"], "--seed", SEED),
-    (["tune", "lqr"], "--budget", COUNT),
+    (["tune", "lqr"], "--trials", COUNT),
     (["tune", "lqr"], "--seed", SEED),
     (["tune", "lqr"], "--workers", WORKERS),
     (["bench"], "--episodes", COUNT),

@@ -219,14 +219,22 @@ def test_readme_test_command_is_what_ci_runs():
     assert test_cmd[0] in ci.splitlines()
 
 
-def test_convergence_command(tmp_path, capsys):
+def test_convergence_command_is_the_convergence_suite(tmp_path, capsys):
     code, out, _ = run(["convergence", "--speeds", "1.0", "--out", str(tmp_path)], capsys)
     assert code == 0
-    assert "24/24 runs settled within 20 s" in out
-    with open(tmp_path / "convergence.csv") as fh:
+    assert "24/24 runs meet settling_time_s <= 20 and min_person_distance_m >= 0.5" in out
+    with open(tmp_path / "episodes.csv") as fh:
         rows = list(csv.DictReader(fh))
-    assert len(rows) == 24 and all(r["ok"] == "1" for r in rows)
+    assert len(rows) == 24 and {r["group"] for r in rows} == {"fig3-1mps"}
+    assert max(float(r["settling_time_s"]) for r in rows) <= 20.0
     assert min(float(r["min_person_distance_m"]) for r in rows) >= 0.5
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["failed"] == [] and len(summary["criteria"]) == 2
+    # a limit no run meets: every episode fails the criteria, exit 1, each one named
+    code, out, _ = run(["convergence", "--speeds", "1.0", "--settle-limit", "0.5",
+                        "--out", str(tmp_path / "tight")], capsys)
+    assert code == 1 and "0/24 runs meet settling_time_s <= 0.5" in out
+    assert out.count("FAIL: settling_time_s <= 0.5") == 24
 
 
 def test_bench_json_has_the_documented_keys(tmp_path, capsys):
@@ -325,8 +333,8 @@ def test_scenario_sensing_table_is_used_and_the_flag_overrides_it(tmp_path, caps
 
 def test_cli_choices_are_the_registries():
     from companion.apps import cli
-    from companion.apps.tune import SPACES
     from companion.control import CONTROLLERS
+    from companion.evaluate.tuning import SPACES
     from companion.params import SIDES
 
     assert cli.CONTROLLERS == tuple(sorted(CONTROLLERS))

@@ -12,6 +12,7 @@ from companion.apps import table3
 from companion.apps.cli import main
 from companion.apps.reproduce import PAPER_TABLE2, TABLE2_COLUMNS, TRAJECTORIES
 from companion.control import CONTROLLERS
+from companion.evaluate.suite import load_suite
 from companion.params import REALISTIC
 from companion.sim.runner import run_one
 
@@ -102,14 +103,15 @@ def test_table3_is_the_mean_of_runs_of_every_controller_under_each_sensing(out):
     rows = _rows(out / "table3.csv")
     assert tuple(rows[0]) == table3.COLUMNS
     assert {(r["trajectory"], r["sensing"], r["controller"]) for r in rows} == {
-        (t, s, c) for t in table3.EXPERIMENTS for s in ("em-tracker", "realistic")
+        (t, s, c) for t in table3.PAPER_TABLE3 for s in ("em-tracker", "realistic")
         for c in CONTROLLERS}
-    assert all(int(r["runs"]) == len(table3.SEEDS) for r in rows)
+    assert all(int(r["runs"]) == 5 for r in rows)
     md = (out / "table3.md").read_text()
     assert "0.226" in md and "0.068" in md                # the paper's numbers beside ours
     # the LQR's U-shaped row is the mean of its seeds run one at a time, with realistic sensing
-    jobs = [spec for traj, sensing, ctl, spec in table3.jobs(["lqr"])
-            if traj == "U-shaped" and sensing == "realistic"]
+    jobs = [e.spec for e in load_suite("table3").episodes if e.motion == "U-shaped"
+            and e.sensing == "realistic" and e.controller == "lqr"]
+    assert len(jobs) == 5 and len({spec.seed for spec in jobs}) == 5
     assert all(spec.params.sensing == REALISTIC for spec in jobs)
     single = [metrics.compute(run_one(spec)) for spec in jobs]
     row = next(r for r in rows if r["trajectory"] == "U-shaped" and r["controller"] == "lqr"

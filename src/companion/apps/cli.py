@@ -107,25 +107,24 @@ def parser() -> argparse.ArgumentParser:
     _workers(ev)
     ev.set_defaults(func="evaluation.cmd_evaluate")
 
-    tn = sub.add_parser("tune", help="tune a controller's gains (docs/baselines.md)")
+    tn = sub.add_parser("tune", help="tune a controller's parameters with Optuna on a suite "
+                        "(docs/baselines.md, docs/evaluation.md)")
     tn.add_argument("controller", choices=TUNABLE)
-    tn.add_argument("--budget", type=int, default=64, metavar="N",
-                    help=f"candidates, {rng('--budget', 'N')} (default 64)")
+    tn.add_argument("--suite", default="fair-tuning", metavar="SUITE",
+                    help="evaluation suite (a shipped name or a TOML file) whose episodes of "
+                    "the controller score a trial (default fair-tuning: the procedure every "
+                    "controller is tuned with)")
+    tn.add_argument("--trials", type=int, default=64, metavar="N", help="trials in the study, "
+                    f"the budget, {rng('--trials', 'N')} (default 64)")
     tn.add_argument("--seed", type=int, default=0, metavar="N",
-                    help=f"random seed, {rng('--seed', 'N')} (default 0)")
-    tn.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
-    tn.add_argument("--suite", metavar="FILE", help="tune with Optuna on this evaluation "
-                    "suite's episodes of the controller instead (docs/evaluation.md)")
-    tn.add_argument("--trials", type=int, default=40, metavar="N", help="with --suite: trials "
-                    f"in the study, {rng('--trials', 'N')} (default 40)")
-    tn.add_argument("--storage", metavar="URL", help="with --suite: Optuna storage that keeps "
-                    "the trials, e.g. sqlite:///study.db; a stopped study resumes from it")
-    _dask(tn, "with --suite: ")
-    tn.add_argument("--out", metavar="DIR", help="with --suite: output folder for best.toml "
-                    "and trials.csv (default out/tune-CONTROLLER)")
+                    help=f"the sampler's seed, {rng('--seed', 'N')} (default 0)")
+    tn.add_argument("--storage", metavar="URL", help="Optuna storage that keeps the trials, "
+                    "e.g. sqlite:///study.db; a stopped study resumes from it")
+    _dask(tn)
+    tn.add_argument("--out", metavar="DIR", help="output folder for best.toml and trials.csv "
+                    "(default out/tune-CONTROLLER)")
     _workers(tn)
-    _sensing(tn)
-    tn.set_defaults(func="cmd_tune")
+    tn.set_defaults(func="evaluation.cmd_tune")
 
     sc = sub.add_parser("scenarios", help="list the built-in scenarios")
     sc.set_defaults(func="cmd_scenarios")
@@ -136,15 +135,15 @@ def parser() -> argparse.ArgumentParser:
                     help=f"person speeds, each {rng('--speeds', 'V')} (default 0.5,1.0)")
     cv.add_argument("--duration", default="30", metavar="S",
                     help=f"simulated time per run, {rng('--duration', 'S')} (default 30)")
-    cv.add_argument("--settle-limit", default="20", metavar="S",
+    cv.add_argument("--settle-limit", metavar="S",
                     help=f"a run must settle within this time, {rng('--settle-limit', 'S')} "
-                         "(default 20)")
+                         "(default: the convergence suite's, 20)")
     cv.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
     cv.add_argument("--out", metavar="DIR", help="output folder (default out/convergence)")
     cv.add_argument("--plot", action="store_true", help="write the Fig. 3 panels as PNG")
     _workers(cv)
     _sensing(cv)
-    cv.set_defaults(func="cmd_convergence")
+    cv.set_defaults(func="suites.cmd_convergence")
 
     pd = sub.add_parser("pedestrians", help="every controller beside real walkers (ETH/UCY), ideal "
                         "or realistic sensing (docs/sensing.md)")
@@ -164,7 +163,7 @@ def parser() -> argparse.ArgumentParser:
     pd.add_argument("--out", metavar="DIR", help="output folder (default out/pedestrians)")
     _workers(pd)
     _sensing(pd)
-    pd.set_defaults(func="cmd_pedestrians")
+    pd.set_defaults(func="suites.cmd_pedestrians")
 
     sk = sub.add_parser("soak", help="long run of a random walker among obstacles "
                         "(docs/safety.md); exit 1 on a collision or a non-finite value")

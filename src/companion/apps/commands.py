@@ -16,33 +16,29 @@ from contextlib import nullcontext
 from pathlib import Path
 
 from companion import metrics
-from companion.apps import animate, benchmark, fuzz, movie, plots, reproduce, table3, tune
+from companion.apps import animate, benchmark, fuzz, movie, plots, reproduce, table3
 from companion.apps.args import (
     UsageError,
     build_scenario,
     checked_controllers,
     duration_arg,
     file_params,
-    floats_arg,
     int_arg,
-    number_arg,
     output_dir,
     output_file,
     params_arg,
-    ranged,
     seed_arg,
     workers_arg,
 )
 from companion.apps.logfile import LogCsv, Thinned, write_log
 from companion.apps.progress import progress_bar
-from companion.control import CONTROLLERS, lookup
-from companion.data import pedestrians
-from companion.evaluate import fuzz_runs, walkers
+from companion.control import lookup
+from companion.evaluate import fuzz_runs
 from companion.io import Outputs, save_figure, write_csv, write_json
 from companion.params import Params
-from companion.sim import convergence, soak
 from companion.sim import fuzz as sim_fuzz
-from companion.sim.runner import run_many, stream_one
+from companion.sim import soak
+from companion.sim.runner import stream_one
 from companion.sim.scenario import builtin_names, load_scenario
 from companion.types import Log
 
@@ -152,101 +148,6 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_convergence(args: argparse.Namespace) -> int:
-    params = params_arg(args)
-    checked_controllers([args.controller], params, args.params)
-    speeds = ranged(floats_arg(args.speeds, len(args.speeds.split(",")), "--speeds"),
-                    args.speeds, "--speeds", "V")
-    duration = duration_arg(args.duration, dt=params.dt)
-    settle_limit = number_arg(args.settle_limit, "--settle-limit", "S")
-    workers = workers_arg(args)
-    out = output_dir(Path(args.out or Path("out") / "convergence"))
-    cases = list(convergence.cases(speeds))
-    logs = run_many([convergence.episode(c, args.controller, params, duration) for c in cases],
-                    workers)
-    rows, runs, lines, failures = [], {}, [], 0
-    for case, log in zip(cases, logs):
-        m = metrics.compute(log)
-        settle = m["settling_time_s"]
-        ok = settle is not None and settle <= settle_limit \
-            and m["min_person_distance_m"] >= 0.5
-        failures += not ok
-        rows.append((*convergence.csv_row(case, m), int(ok)))
-        runs.setdefault(case.speed, []).append((case.label, case.side, log))
-        lines.append(f"{case.speed:5.2f} {case.label:>10} {case.start.theta:8.3f} "
-                     f"{case.side:>5} {'never' if settle is None else f'{settle:.2f}':>9} "
-                     f"{m['min_person_distance_m']:10.3f}{'' if ok else '  FAIL'}")
-    with Outputs(out, "convergence") as stage:
-        write_csv(stage / "convergence.csv", (*convergence.CSV_COLUMNS, "ok"), rows)
-        written = ["convergence.csv"]
-        if args.plot:
-            for speed, speed_runs in runs.items():
-                fig = plots.convergence(speed_runs, f"Fig. 3: person at {speed:g} m/s, "
-                                                    f"controller {args.controller}")
-                name = f"fig3_{speed:g}mps.png"
-                save_figure(fig, stage / name)
-                plots.close(fig)
-                written.append(name)
-    print(f"{'speed':>5} {'start':>10} {'heading':>8} {'side':>5} {'settle_s':>9} "
-          f"{'min_dist_m':>10}")
-    print("\n".join(lines))
-    print(f"{len(rows) - failures}/{len(rows)} runs settled within {settle_limit:g} s "
-          f"and kept >= 0.5 m from the person")
-    print(f"wrote {', '.join(written)} in {out}")
-    return 0 if failures == 0 else 1
-
-
-def cmd_pedestrians(args: argparse.Namespace) -> int:
-    params = params_arg(args)
-    controllers = list(CONTROLLERS) if args.controller == "all" else [args.controller]
-    checked_controllers(controllers, params, args.params)
-    sides = ("left", "right") if args.side == "both" else (args.side,)
-    min_speed = number_arg(args.min_speed, "--min-speed", "MPS")
-    min_duration = number_arg(args.min_duration, "--min-duration", "S")
-    workers = workers_arg(args)
-    tracks = pedestrians.select_tracks(pedestrians.load_scenes(args.data),
-                                       min_mean_speed=min_speed, min_duration=min_duration)
-    if not tracks:
-        raise UsageError("no track is fast and long enough; lower --min-speed or --min-duration")
-    out = output_dir(Path(args.out or Path("out") / "pedestrians"))
-    print(f"{len(tracks)} tracks (mean speed > {min_speed:g} m/s, >= "
-          f"{min_duration:g} s) x {len(sides)} side(s) x {len(controllers)} "
-          f"controller(s), {args.sensing or 'ideal'} sensing")
-    with progress_bar(len(tracks) * len(sides) * len(controllers), "episode") as progress:
-        rows = walkers.evaluate(tracks, params, controllers, sides, workers, progress)
-    with Outputs(out, "pedestrians") as stage:
-        write_csv(stage / "pedestrians.csv", walkers.COLUMNS,
-                  ([r[k] for k in walkers.COLUMNS] for r in rows))
-    print(walkers_text(walkers.table(rows), walkers.paired(rows, controllers[0])))
-    print(f"wrote pedestrians.csv in {out}\n")
-    print(pedestrians.CREDIT)
-    return 0
-
-
-def walkers_text(table: dict, paired: dict) -> str:
-    """The per-controller table and the paired comparison of ``companion pedestrians``."""
-    lines = [f"{'controller':10s} {'runs':>5s} {'median rho cm':>13s} {'p90 rho cm':>10s} "
-             f"{'median alpha':>12s} {'closest m':>9s}"]
-    for name, r in table.items():
-        lines.append(f"{name:10s} {r['runs']:5d} {r['median_rho_m'] * 100:13.2f} "
-                     f"{r['p90_rho_m'] * 100:10.2f} {r['median_alpha_rad']:12.3f} "
-                     f"{r['min_distance_m']:9.3f}")
-    lines.append("where the slot error comes from (medians over runs of each run's RMS, cm; "
-                 "the keep-out's displacement in m and the share of steps it acted)")
-    lines.append(f"{'controller':10s} {'slot':>7s} {'estimate':>9s} {'tracking':>9s} "
-                 f"{'keep-out m':>10s} {'acting':>7s}")
-    for name, r in table.items():
-        cells = [r[f"median_rms_{k}_error_m"] for k in ("slot", "estimate", "tracking")]
-        lines.append(f"{name:10s} " + " ".join(
-            f"{'-' if v is None else f'{v * 100:.2f}':>{w}s}" for v, w in zip(cells, (7, 9, 9)))
-            + f" {r['median_safety_shift_m']:10.3f} {r['median_safety_share']:7.1%}")
-    for name, r in paired.items():
-        lines.append(f"paired with {name}: better rho in {r['better_rho']:.0%} of runs (median "
-                     f"difference {r['median_diff_rho'] * 100:+.2f} cm), better alpha in "
-                     f"{r['better_alpha']:.0%} ({r['median_diff_alpha']:+.3f} rad)")
-    return "\n".join(lines)
-
-
 def cmd_soak(args: argparse.Namespace) -> int:
     params = params_arg(args)
     checked_controllers([args.controller], params, args.params)
@@ -344,25 +245,6 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     print(table3.text(result.table3))
     print(f"wrote table2.csv, table2.md, table3.csv, table3.md, fig3.csv, fig4.csv, the "
           f"Fig. 3, 4, 7 PNGs and fig4.gif in {out}")
-    return 0
-
-
-def cmd_tune(args: argparse.Namespace) -> int:
-    if args.suite:
-        from companion.apps.evaluation import cmd_tune_suite
-        return cmd_tune_suite(args)
-    params = params_arg(args)
-    checked_controllers([args.controller], params, args.params)
-    budget, seed = int_arg(args.budget, "--budget"), seed_arg(args.seed)
-    workers = workers_arg(args)
-    print(f"tuning {args.controller}: {budget} candidates, seed {seed}, "
-          f"scenarios {', '.join(c.name for c in tune.tuning_scenarios())}")
-    cases = len(tune.tuning_scenarios())
-    with progress_bar(budget * cases, "episode") as progress:
-        result = tune.tune(args.controller, params, budget, seed, workers, progress)
-    print(f"J: current gains {result.start_score:.4f}, best {result.best_score:.4f}")
-    for dim, value in zip(result.dims, result.best):
-        print(f"  {dim.name} = {value:.4g}")
     return 0
 
 

@@ -1,10 +1,12 @@
-"""``companion evaluate SUITE.toml``: run a suite (:mod:`companion.evaluate`) and write
-episodes.csv, summary.json, summary.md and the figures; print the summary."""
+"""``companion evaluate SUITE``: run a suite (:mod:`companion.evaluate`) and write
+episodes.csv, summary.json, summary.md and the figures; print the summary. The experiment
+commands that are suites (``pedestrians``, ``convergence``) run through :func:`evaluate`."""
 
 from __future__ import annotations
 
 import argparse
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 import matplotlib
@@ -15,9 +17,10 @@ import matplotlib.pyplot as plt
 from companion.apps.args import UsageError, int_arg, output_dir, seed_arg, workers_arg
 from companion.apps.progress import progress_bar
 from companion.evaluate.report import write_episodes, write_summary
+from companion.evaluate.rows import failed
 from companion.evaluate.run import finish, run_suite
 from companion.evaluate.stats import summarize
-from companion.evaluate.suite import load_suite
+from companion.evaluate.suite import Suite, load_suite
 from companion.evaluate.tuning import as_toml, tune_on_suite
 from companion.io import CsvWriter, Outputs, atomic_write, save_figure
 
@@ -26,34 +29,55 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     suite = load_suite(args.suite)
     name = re.sub(r"[^A-Za-z0-9_.-]+", "-", suite.name).strip(".-") or "suite"
     out = output_dir(Path(args.out or Path("out") / f"evaluate-{name}"))
-    workers = workers_arg(args)
+    rows = evaluate(suite, out, workers_arg(args), args.dask)
+    print((out / "summary.md").read_text(encoding="utf-8"))
+    print(f"wrote episodes.csv, summary.json, summary.md and the figures in {out}")
+    return 1 if failures(suite, rows) else 0
+
+
+def evaluate(suite: Suite, out: Path, workers: int | None, dask: str | None = None,
+             rows: list[dict] | None = None,
+             extra: Callable[[Path], None] | None = None) -> list[dict]:
+    """Run ``suite`` into ``out`` (resumable) with a progress bar, write its files and
+    return its rows; ``rows`` already computed (with logs kept for figures) are written
+    as they are; ``extra(folder)`` writes a command's own files with them."""
     controllers = list(dict.fromkeys(e.controller for e in suite.episodes))
     print(f"{suite.name}: {len(suite.episodes)} episodes ({', '.join(controllers)}; "
           f"reference {suite.reference}) on "
-          f"{'local worker processes' if args.dask is None else 'Dask ' + args.dask}")
-    with progress_bar(len(suite.episodes), "episode") as bar:
-        rows = run_suite(suite, out, workers, args.dask, lambda done, total: bar(done))
+          f"{'local worker processes' if dask is None else 'Dask ' + dask}")
+    if rows is None:
+        with progress_bar(len(suite.episodes), "episode") as bar:
+            rows = run_suite(suite, out, workers, dask, lambda done, total: bar(done))
     summary = summarize(rows, suite.reference)
     with Outputs(out, "evaluate") as stage:
         write_episodes(stage / "episodes.csv", rows)
-        write_summary(stage, suite.name, suite.reference, summary)
+        write_summary(stage, suite.name, suite.reference, summary, failures(suite, rows),
+                      [str(c) for c in suite.criteria])
         for name, fig in figures(rows, suite.reference):
             save_figure(fig, stage / name)
             plt.close(fig)
+        if extra is not None:
+            extra(stage)
     finish(out)
-    print((out / "summary.md").read_text(encoding="utf-8"))
-    print(f"wrote episodes.csv, summary.json, summary.md and the figures in {out}")
-    return 0
+    return rows
 
 
-def cmd_tune_suite(args: argparse.Namespace) -> int:
-    """``companion tune CONTROLLER --suite SUITE.toml``: Optuna on the suite's episodes."""
-    if args.params or args.sensing:
-        raise UsageError("--params, --sensing: with --suite the suite says the parameters "
-                         "and the sensing")
-    suite = load_suite(args.suite)
+def failures(suite: Suite, rows: list[dict]) -> list[tuple[str, list[str]]]:
+    """``(episode, missed criteria)`` of every episode that misses the suite's criteria."""
+    out = []
+    for r in rows:
+        missed = failed(r, suite.criteria)
+        if missed:
+            out.append((r["episode"], missed))
+    return out
+
+
+def cmd_tune(args: argparse.Namespace) -> int:
+    """``companion tune CONTROLLER [--suite SUITE]``: Optuna on the suite's episodes."""
     trials = int_arg(args.trials, "--trials")
+    seed, workers = seed_arg(args.seed), workers_arg(args)
     out = output_dir(Path(args.out or Path("out") / f"tune-{args.controller}"))
+    suite = load_suite(args.suite)
     n = sum(e.controller == args.controller for e in suite.episodes)
     if not n:
         raise UsageError(f"{args.suite}: controllers: expected {args.controller!r} among them")
@@ -63,8 +87,8 @@ def cmd_tune_suite(args: argparse.Namespace) -> int:
         def progress(number: int, value: float) -> None:
             bar(min(number + 1, trials))
         tuned = tune_on_suite(suite, args.controller, trials, args.storage,
-                              workers=workers_arg(args), dask=args.dask,
-                              seed=seed_arg(args.seed), progress=progress)
+                              workers=workers, dask=args.dask, seed=seed,
+                              progress=progress)
     with Outputs(out, "tune") as stage:
         atomic_write(stage / "best.toml", lambda p: p.write_text(
             f"# companion tune {args.controller} --suite {args.suite}: J {tuned.best_value:.4f} "

@@ -49,7 +49,6 @@ FLAGS: dict[str, Bound] = {
     "--min-speed": SPEED,
     "--min-duration": Bound(0.0, MAX_DURATION, unit="s"),
     "--workers": WORKERS,
-    "--budget": COUNT,
     "--trials": COUNT,
     "--episodes": COUNT,
     "--seed": SEED,

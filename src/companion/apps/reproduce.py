@@ -16,10 +16,11 @@ from pathlib import Path
 from companion import metrics
 from companion.apps import animate, plots, table3
 from companion.control import CONTROLLERS
+from companion.evaluate.rows import row_and_log
+from companion.evaluate.run import run_episodes
+from companion.evaluate.suite import Suite, load_suite
 from companion.io import save_figure, write_csv, write_text
-from companion.params import Params
 from companion.sim import convergence
-from companion.sim.runner import run_many
 from companion.sim.scenario import load_scenario
 
 #: Table 2 trajectory name -> built-in scenario.
@@ -117,40 +118,46 @@ class Reproduction:
     table3: list[list]
 
 
+def suites() -> dict[str, Suite]:
+    """The shipped suites :func:`reproduce` runs: Fig. 3, Table 2 and Table 3."""
+    return {name: load_suite(name) for name in ("convergence", "table2", "table3")}
+
+
 def episode_count() -> int:
     """Episodes :func:`reproduce` runs: Fig. 3, Table 2, Fig. 4, Fig. 7 and Table 3."""
-    names = controllers()
-    return (len(list(convergence.cases())) + len(TRAJECTORIES) * len(names) + len(names) + 1
-            + len(table3.jobs(names)))
+    return sum(len(s.episodes) for s in suites().values()) + len(controllers()) + 1
 
 
 def reproduce(out: Path, workers: int | None = None, progress: Progress | None = None
               ) -> Reproduction:
-    """Run Fig. 3, Table 2, Fig. 4, Fig. 7 and Table 3 (every episode through the runner,
-    in ``workers`` processes) and write their files into ``out``."""
+    """Run Fig. 3, Table 2 and Table 3 (their shipped suites), Fig. 4 and Fig. 7 (every
+    episode through the runner, in ``workers`` processes) and write their files into
+    ``out``."""
     names = controllers()
-    cases = list(convergence.cases())
-    table2_jobs = [(traj, ctl) for traj in TRAJECTORIES for ctl in names]
+    runs = suites()
     fig4, fig7 = load_scenario("fig4"), load_scenario("fig7")
-    specs = [convergence.episode(case, "lqr", Params()) for case in cases]
-    specs += [load_scenario(TRAJECTORIES[traj]).episode(ctl) for traj, ctl in table2_jobs]
-    specs += [fig4.episode(ctl) for ctl in names] + [fig7.episode("lqr")]
-    table3_jobs = table3.jobs(names)
-    specs += [spec for *_, spec in table3_jobs]
-    logs = iter(run_many(specs, workers, progress=progress))
+    fig3 = runs["convergence"].episodes
+    logged = [e.spec for e in fig3] + [fig4.episode(c) for c in names] + [fig7.episode("lqr")]
+    tables = runs["table2"].episodes + runs["table3"].episodes
+    results = run_episodes(logged, workers, reduce=row_and_log, progress=progress)
+    plain = run_episodes([e.spec for e in tables], workers, progress=progress and (
+        lambda n: progress(len(logged) + n)))
     fig3_runs: dict[float, list] = {}
     fig3_rows = []
-    for case, log in zip(cases, logs):
+    for e, (row, log) in zip(fig3, results):
+        case = convergence.Case(e.spec.person.state(0.0).v, e.spec.start, e.side)
         fig3_runs.setdefault(case.speed, []).append((case.label, case.side, log))
-        fig3_rows.append(convergence.csv_row(case, metrics.compute(log)))
-    rows = [Table2Row(traj, ctl, metrics.compute(log)) for (traj, ctl), log
-            in zip(table2_jobs, logs)]
-    fig4_runs = {ctl: log for ctl, log in zip(names, logs)}
-    fig7_log = next(logs)
-    table3_rows = table3.rows(table3_jobs, list(logs))
+        fig3_rows.append(convergence.csv_row(case, _metrics(row)))
+    fig4_runs = {ctl: log for ctl, (_, log) in zip(names, results[len(fig3):])}
+    fig7_log = results[-1][1]
+    rows2 = [{**e.factors, **r} for e, r in zip(tables, plain)]
+    trajectory = {v: k for k, v in TRAJECTORIES.items()}
+    rows = [Table2Row(trajectory[r["motion"]], r["controller"], r)
+            for r in rows2[:len(runs["table2"].episodes)]]
+    table3_rows = table3.rows(rows2[len(runs["table2"].episodes):])
     write_csv(out / "fig3.csv", convergence.CSV_COLUMNS, fig3_rows)
-    for speed, runs in fig3_runs.items():
-        _save(plots.convergence(runs, f"Fig. 3: person at {speed:g} m/s (lqr)"),
+    for speed, speed_runs in fig3_runs.items():
+        _save(plots.convergence(speed_runs, f"Fig. 3: person at {speed:g} m/s (lqr)"),
               out / f"fig3_{speed:g}mps.png")
     write_csv(out / "table2.csv", TABLE2_COLUMNS,
               ([r.trajectory, r.controller, *r.values()] for r in rows))
@@ -164,6 +171,11 @@ def reproduce(out: Path, workers: int | None = None, progress: Progress | None =
     write_csv(out / "table3.csv", table3.COLUMNS, table3_rows)
     write_text(out / "table3.md", table3.markdown(table3_rows))
     return Reproduction(rows, fig3_rows, fig4_table, table3_rows)
+
+
+def _metrics(row: dict) -> dict:
+    """A row's metrics as :func:`companion.metrics.compute` gives them (None for NaN)."""
+    return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in row.items()}
 
 
 FIG4_COLUMNS = ("controller", "obstacle_collisions", "min_obstacle_clearance_m",

@@ -20,12 +20,29 @@ def write_episodes(path: Path, rows: Sequence[dict]) -> None:
         out.add([r[k] for k in (*FACTORS, *numbers)] for r in rows)
 
 
-def write_summary(folder: Path, name: str, reference: str, summary: dict) -> None:
+def write_summary(folder: Path, name: str, reference: str, summary: dict,
+                  failures: Sequence[tuple[str, list[str]]] = (),
+                  criteria: Sequence[str] = ()) -> None:
+    """summary.json and summary.md; ``failures``: the episodes that miss the suite's
+    ``criteria`` and what they miss."""
     atomic_write(folder / "summary.json", lambda p: p.write_text(
-        json.dumps({"suite": name, "reference": reference, "conditions": summary},
-                   indent=1, allow_nan=True) + "\n", encoding="utf-8"))
+        json.dumps({"suite": name, "reference": reference, "criteria": list(criteria),
+                    "failed": [{"episode": e, "missed": m} for e, m in failures],
+                    "conditions": summary}, indent=1, allow_nan=True) + "\n",
+        encoding="utf-8"))
     atomic_write(folder / "summary.md", lambda p: p.write_text(
-        markdown(name, reference, summary), encoding="utf-8"))
+        markdown(name, reference, summary) + criteria_text(failures, criteria),
+        encoding="utf-8"))
+
+
+def criteria_text(failures: Sequence[tuple[str, list[str]]], criteria: Sequence[str]) -> str:
+    """The suite's pass criteria and the episodes that miss them (empty without criteria)."""
+    if not criteria:
+        return ""
+    lines = [f"## Criteria: {'; '.join(criteria)}", "",
+             f"{len(failures)} episode(s) miss them."]
+    lines += [f"- {episode}: {', '.join(missed)}" for episode, missed in failures]
+    return "\n".join(lines) + "\n"
 
 
 def _ci(d: dict, scale: float, digits: int) -> str:

@@ -11,35 +11,16 @@ number or kind of workers (given the same companion and libraries on every worke
 from __future__ import annotations
 
 import json
-import math
 import os
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
+from companion.evaluate.rows import summary_row
 from companion.evaluate.suite import Suite
-from companion.metrics import compute
-from companion.sim.fuzz import episode_counts
-from companion.sim.runner import EpisodeSpec, run_one, run_unordered
+from companion.sim.runner import EpisodeSpec, run_unordered
 
 PARTIAL = ".evaluate.partial"
-#: Safety counts kept per episode (companion.sim.fuzz.episode_counts).
-COUNTS = ("person_collisions", "person_collisions_robot", "violations", "obstacle_collisions")
-
-
-def summary_row(spec: EpisodeSpec) -> dict[str, Any]:
-    """Run one episode and reduce it to its numbers: every scalar metric of
-    :func:`companion.metrics.compute`, the fuzz's safety counts against the true person, and
-    ``safe`` (no robot-caused contact or protective violation, no obstacle contact)."""
-    log = run_one(spec)
-    m = compute(log)
-    row = {k: (math.nan if v is None else float(v)) for k, v in m.items()
-           if v is None or isinstance(v, (int, float))}
-    counts = episode_counts(log, spec.params, spec.obstacles)
-    row.update({k: int(counts[k]) for k in COUNTS})
-    row["safe"] = (counts["person_collisions_robot"] == 0 and counts["violations"] == 0
-                   and counts["obstacle_collisions"] == 0)
-    return row
 
 
 def run_suite(suite: Suite, out: Path, workers: int | None = None, dask: str | None = None,
@@ -58,21 +39,40 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None, dask: str | N
     if progress:
         progress(total - len(todo), total)
     with _Appender(store, suite.digest, fresh=not kept) as keep:
-        for n, (i, result) in enumerate(_backend(dask, workers, [e.spec for e in todo]), 1):
+        for n, (i, result) in enumerate(_backend(dask, workers, [e.spec for e in todo],
+                                                 summary_row), 1):
             done[todo[i].key] = result
             keep(todo[i].key, result)
             if progress:
                 progress(total - len(todo) + n, total)
-    return [{**e.factors, "episode": e.key, "pair": e.pair, **done[e.key]}
+    return suite_rows(suite, done)
+
+
+def run_all(suite: Suite, workers: int | None = None, dask: str | None = None,
+            progress: Callable[[int], None] | None = None) -> list[dict]:
+    """The rows of :func:`run_suite` without keeping anything on disk (benches, tests)."""
+    results = run_episodes([e.spec for e in suite.episodes], workers, dask, progress=progress)
+    return suite_rows(suite, {e.key: r for e, r in zip(suite.episodes, results)})
+
+
+def suite_rows(suite: Suite, results: dict[str, dict]) -> list[dict]:
+    """One row per episode of ``suite``: its factors, ``episode``, ``pair`` and its numbers
+    (``results`` by episode key)."""
+    return [{**e.factors, "episode": e.key, "pair": e.pair, **results[e.key]}
             for e in suite.episodes]
 
 
 def run_episodes(specs: Sequence[EpisodeSpec], workers: int | None = None,
-                 dask: str | None = None) -> list[dict]:
-    """:func:`summary_row` of every spec, in order, on the backend of :func:`run_suite`."""
+                 dask: str | None = None, reduce: Callable[[EpisodeSpec], Any] = summary_row,
+                 progress: Callable[[int], None] | None = None) -> list:
+    """``reduce(spec)`` (a picklable function: by default the episode's row, or
+    :func:`~companion.evaluate.rows.row_and_log`) of every spec, in order, on the backend of
+    :func:`run_suite`; ``progress(done)`` after each episode."""
     out: list = [None] * len(specs)
-    for i, result in _backend(dask, workers, specs):
+    for n, (i, result) in enumerate(_backend(dask, workers, specs, reduce), 1):
         out[i] = result
+        if progress:
+            progress(n)
     return out
 
 
@@ -85,14 +85,14 @@ def finish(out: Path) -> None:
         store.rmdir()
 
 
-def _backend(dask: str | None, workers: int | None, specs: Sequence[EpisodeSpec]
-             ) -> Iterator[tuple[int, dict]]:
+def _backend(dask: str | None, workers: int | None, specs: Sequence[EpisodeSpec],
+             reduce: Callable[[EpisodeSpec], Any]) -> Iterator[tuple[int, Any]]:
     if not specs:
         return iter(())
     if dask is None:
-        return run_unordered(specs, workers, summary_row)
+        return run_unordered(specs, workers, reduce)
     from companion.evaluate.dask_backend import run_dask
-    return run_dask(specs, dask, workers, summary_row)
+    return run_dask(specs, dask, workers, reduce)
 
 
 def _load(store: Path, digest: str) -> tuple[bool, dict[str, dict]]:

@@ -83,7 +83,7 @@ def describe(rows: Sequence[dict], metric: str) -> dict:
 
 
 def safe_share(rows: Sequence[dict]) -> dict:
-    """The share of safe episodes (:func:`companion.evaluate.run.summary_row`'s ``safe``)
+    """The share of safe episodes (:func:`companion.evaluate.rows.summary_row`'s ``safe``)
     with its exact interval."""
     k, n = sum(bool(r["safe"]) for r in rows), len(rows)
     low, high = binomial_ci(k, n)

@@ -19,23 +19,22 @@ from typing import Any
 
 import numpy as np
 
-from companion.config import load_toml, reject_unknown
+from companion.config import build, load_toml, reject_unknown
 from companion.control import CONTROLLERS
-from companion.data import pedestrians
 from companion.errors import ConfigError
-from companion.params import SIDES, Params, load_sensing, params_from_mapping
+from companion.evaluate.motions import fixed_sides, motions
+from companion.evaluate.rows import Criterion, criteria_from
+from companion.params import SIDES, Params, SensingParams, load_sensing, params_from_mapping
 from companion.sim.faults import faults_from_list
-from companion.sim.recorded import RecordedPerson, load_person_csv
+from companion.sim.recorded import RecordedPerson
 from companion.sim.runner import EpisodeSpec
-from companion.sim.scenario import builtin_path, load_scenario
 from companion.sim.sensing import OBSTACLE_SOURCES
 
 TOP = ("name", "description", "reference", "seeds", "controllers", "sensing", "sides",
-       "obstacles", "duration", "motions", "faults")
-MOTIONS = ("scenarios", "tracks", "every", "offset", "min_mean_speed", "min_duration")
+       "obstacles", "duration", "motions", "faults", "criteria")
 CONTROLLER = ("name", "params", "label")
-#: The shipped walking tracks, by name.
-SHIPPED_TRACKS = "eth_ucy"
+#: The suites shipped with companion (``companion evaluate NAME``).
+BUILTIN = Path(__file__).resolve().parent.parent / "suites"
 
 
 @dataclass(frozen=True)
@@ -78,30 +77,44 @@ class Suite:
     reference: str
     episodes: tuple[Episode, ...]
     digest: str
+    criteria: tuple[Criterion, ...] = ()
 
 
-def load_suite(path: str | Path) -> Suite:
-    """Parse and expand the suite file at ``path``."""
-    path = Path(path)
+def builtin_suites() -> list[str]:
+    """The names of the shipped suites."""
+    return sorted(p.stem for p in BUILTIN.glob("*.toml"))
+
+
+def suite_path(name: str | Path) -> Path:
+    """A suite file, or a shipped suite by name (``pedestrians``)."""
+    if str(name) in builtin_suites():
+        return BUILTIN / f"{name}.toml"
+    return Path(name)
+
+
+def load_suite(name: str | Path) -> Suite:
+    """Parse and expand the suite file at ``name`` (or the shipped suite of that name)."""
+    path = suite_path(name)
     data = load_toml(path)
+    return suite_from_mapping(data, path, hashlib.sha256(path.read_bytes()))
+
+
+def suite_from_mapping(data: Mapping[str, Any], path: Path, digest: Any = None) -> Suite:
+    """Expand a parsed suite; ``path`` names it in errors and anchors its relative files
+    (a command line's suite: a name whose folder is the working one). ``digest``: a
+    hashlib object already fed with the file, else one fed with ``data``."""
     where = f"{path}: "
     reject_unknown(data, TOP, where)
-    digest = hashlib.sha256(path.read_bytes())
+    if digest is None:
+        digest = hashlib.sha256(repr(sorted(data.items())).encode())
     controllers = _controllers(data.get("controllers", ["lqr"]), path, digest)
     labels = [c[0] for c in controllers]
     reference = data.get("reference", labels[0])
     if reference not in labels:
         raise ConfigError(f"{where}reference: expected one of the controllers "
                           f"({', '.join(labels)}), got {reference!r}")
-    sensing = []
-    for i, s in enumerate(_list(data.get("sensing", ["realistic"]), f"{where}sensing")):
-        name = _sensing_name(s, path, i)
-        try:
-            sensing.append((Path(name).stem, load_sensing(_resolve(name, path))))
-        except ConfigError as exc:
-            raise ConfigError(f"{where}sensing[{i}]: {exc}") from None
-        if name.endswith(".toml"):
-            digest.update(Path(_resolve(name, path)).read_bytes())
+    sensing = [_sensing(s, path, i, digest) for i, s
+               in enumerate(_list(data.get("sensing", ["realistic"]), f"{where}sensing"))]
     sides = [_side(s, f"{where}sides[{i}]")
              for i, s in enumerate(_list(data.get("sides", ["left"]), f"{where}sides"))]
     seeds = _seeds(data.get("seeds", 1), f"{where}seeds")
@@ -115,11 +128,13 @@ def load_suite(path: str | Path) -> Suite:
         raise ConfigError(f"{where}duration: expected a positive number of seconds, got "
                           f"{duration!r}")
     faults = faults_from_list(data["faults"], f"{where}faults") if "faults" in data else ()
-    motions = _motions(data.get("motions", {"scenarios": ["figure8"]}), path, digest)
+    criteria = criteria_from(data["criteria"], f"{where}criteria") if "criteria" in data else ()
     episodes = []
     final: dict[tuple, Params] = {}     # validated once per group, controller, side, sensing
-    for m, (motion, group, base, build) in enumerate(motions):
-        for side_name, bearing in sides:
+    for m, motion in enumerate(motions(data.get("motions", {"scenarios": ["figure8"]}), path,
+                                       digest, _resolve)):
+        group, base, build = motion.group, motion.base, motion.build
+        for side_name, bearing in fixed_sides(motion, sides):
             for sensing_name, sensing_params in sensing:
                 for seed in seeds:
                     episode_seed = _episode_seed(seed, m)
@@ -129,14 +144,16 @@ def load_suite(path: str | Path) -> Suite:
                             p = base(label, overrides)
                             final[key] = p.replace(
                                 sensing=sensing_params,
-                                formation=dataclasses.replace(p.formation, bearing=bearing))
+                                formation=dataclasses.replace(
+                                    p.formation, bearing=p.formation.bearing
+                                    if bearing is None else bearing))
                         spec = build(label, overrides, name)
                         spec = dataclasses.replace(
                             spec, params=final[key], seed=episode_seed,
                             duration=min(spec.duration, duration or math.inf),
                             obstacle_source=obstacles or spec.obstacle_source,
                             faults=spec.faults + tuple(faults))
-                        episodes.append(Episode(motion, group, side_name, sensing_name, label,
+                        episodes.append(Episode(motion.name, group, side_name, sensing_name, label,
                                                 seed, spec))
     keys = [e.key for e in episodes]
     if len(set(keys)) != len(keys):
@@ -144,7 +161,7 @@ def load_suite(path: str | Path) -> Suite:
         raise ConfigError(f"{where}two episodes would be {twice!r}: a motion, side or sensing "
                           f"named twice, or two files of one name")
     return Suite(str(data.get("name", path.stem)), str(data.get("description", "")), reference,
-                 tuple(episodes), digest.hexdigest())
+                 tuple(episodes), digest.hexdigest(), criteria)
 
 
 def track_episode(person: RecordedPerson, params: Params, controller: str = "lqr",
@@ -180,16 +197,26 @@ def _controllers(items: Any, path: Path, digest: Any) -> list[tuple[str, str, di
             raise ConfigError(f"{at}.name: expected one of {', '.join(CONTROLLERS)}, got "
                               f"{name!r}")
         overrides: dict = {}
-        if "params" in item:
-            file = _resolve(item["params"], path)
+        given = item.get("params")
+        if isinstance(given, Mapping):                 # a table of overrides in the suite
+            try:
+                params_from_mapping(given, prefix=f"{at}.params.")
+            except ConfigError as exc:
+                raise ConfigError(str(exc)) from None
+            overrides = dict(given)
+            digest.update(repr(sorted(overrides.items())).encode())
+        elif given is not None:
+            file = _resolve(given, path)
             try:
                 overrides = load_toml(file)
                 params_from_mapping(overrides, prefix=f"{file}: ")   # errors name the file
             except ConfigError as exc:
                 raise ConfigError(f"{at}.params: {exc}") from None
             digest.update(Path(file).read_bytes())
-        label = str(item.get("label", name if "params" not in item
-                             else f"{name}+{Path(item['params']).stem}"))
+        if "label" not in item and isinstance(given, Mapping):
+            raise ConfigError(f"{at}.label: expected a label for a controller with a table of "
+                              f"params")
+        label = str(item.get("label", name if given is None else f"{name}+{Path(given).stem}"))
         out.append((label, name, overrides))
     labels = [c[0] for c in out]
     if len(set(labels)) != len(labels):
@@ -197,84 +224,6 @@ def _controllers(items: Any, path: Path, digest: Any) -> list[tuple[str, str, di
     if not out:
         raise ConfigError(f"{where}: expected at least one controller")
     return out
-
-
-def _motions(data: Any, path: Path, digest: Any) -> list[tuple[str, str, Any, Any]]:
-    """Per person motion: its name, its group, ``base(label, overrides) -> Params`` (the
-    motion's parameters with a controller's overrides) and ``build(label, overrides,
-    controller) -> EpisodeSpec``."""
-    where = f"{path}: motions"
-    if not isinstance(data, Mapping):
-        raise ConfigError(f"{where}: expected a table with scenarios and/or tracks")
-    reject_unknown(data, MOTIONS, f"{where}.")
-    out: list[tuple[str, str, Any, Any]] = []
-    scenarios = data.get("scenarios", []) and _list(data["scenarios"], f"{where}.scenarios")
-    for i, name in enumerate(scenarios):
-        scenario = _resolve(name, path) if str(name).endswith(".toml") else str(name)
-        try:
-            load_scenario(scenario)                       # its errors name the scenario
-        except ConfigError as exc:
-            raise ConfigError(f"{where}.scenarios[{i}]: {exc}") from None
-        file = Path(scenario) if scenario.endswith(".toml") else builtin_path(scenario)
-        digest.update(file.read_bytes())
-        cache: dict[str, Any] = {}     # the scenario with a controller's overrides, by label
-
-        def loaded(label: str, over: dict, scenario: str = scenario, cache: dict = cache):
-            if label not in cache:
-                cache[label] = load_scenario(scenario, params_override=over or None)
-            return cache[label]
-
-        def base(label: str, over: dict, loaded=loaded) -> Params:
-            return loaded(label, over).params
-
-        def build(label: str, over: dict, controller: str, loaded=loaded) -> EpisodeSpec:
-            return loaded(label, over).episode(controller)
-
-        out.append((Path(str(name)).stem, Path(str(name)).stem, base, build))
-    tracks = data.get("tracks")
-    if tracks is not None:
-        every = _count(data.get("every", 1), f"{where}.every")
-        offset = data.get("offset", 0)
-        if isinstance(offset, bool) or not isinstance(offset, int) or not 0 <= offset < every:
-            raise ConfigError(f"{where}.offset: expected an integer in [0, every), got "
-                              f"{offset!r}")
-
-        def track_base(label: str, over: dict) -> Params:
-            return params_from_mapping(over)
-
-        for label, person in _tracks(tracks, data, path, digest)[offset::every]:
-            def track_build(label: str, over: dict, controller: str,
-                            person=person) -> EpisodeSpec:
-                return EpisodeSpec(controller, person, Params(), person.duration)
-            out.append((label, "tracks", track_base, track_build))
-    if not out:
-        raise ConfigError(f"{where}: expected at least one scenario or track")
-    return out
-
-
-def _tracks(tracks: Any, data: Mapping, path: Path, digest: Any
-            ) -> list[tuple[str, RecordedPerson]]:
-    """The named tracks (their data added to ``digest``)."""
-    where = f"{path}: motions.tracks"
-    if tracks == SHIPPED_TRACKS:
-        chosen = pedestrians.select_tracks(
-            pedestrians.load_scenes(), _number(data.get("min_mean_speed", 0.6),
-                                               f"{path}: motions.min_mean_speed"),
-            _number(data.get("min_duration", 15.0), f"{path}: motions.min_duration"))
-        for tr in chosen:
-            digest.update(np.asarray((tr.t, tr.x, tr.y), dtype=float).tobytes())
-        return [(f"{tr.scene}/{tr.ped_id}", RecordedPerson(tr.t, tr.x, tr.y)) for tr in chosen]
-    if not isinstance(tracks, str):
-        raise ConfigError(f"{where}: expected {SHIPPED_TRACKS!r} or a folder of t,x,y CSV "
-                          f"files, got {tracks!r}")
-    folder = Path(_resolve(tracks, path))
-    files = sorted(folder.glob("*.csv")) if folder.is_dir() else []
-    if not files:
-        raise ConfigError(f"{where}: expected {SHIPPED_TRACKS!r} or a folder of t,x,y CSV "
-                          f"files, got {tracks!r} (no CSV files there)")
-    for f in files:
-        digest.update(f.read_bytes())
-    return [(f.stem, load_person_csv(f)) for f in files]
 
 
 def _resolve(name: Any, path: Path) -> str:
@@ -286,19 +235,47 @@ def _resolve(name: Any, path: Path) -> str:
     return name
 
 
-def _sensing_name(value: Any, path: Path, i: int) -> str:
+def _sensing(value: Any, path: Path, i: int, digest: Any) -> tuple[str, SensingParams]:
+    """``(label, sensing)`` of a profile name, a .toml file or a table ``{label, base,
+    <sensing keys>}``: the profile ``base`` (default realistic) with those keys changed."""
+    where = f"{path}: sensing[{i}]"
+    if isinstance(value, Mapping):
+        label, base = value.get("label"), value.get("base", "realistic")
+        if not isinstance(label, str) or not label:
+            raise ConfigError(f"{where}.label: expected a name for this sensing, got {label!r}")
+        if not isinstance(base, str):
+            raise ConfigError(f"{where}.base: expected a profile name or a .toml file, got "
+                              f"{base!r}")
+        keys = {k: v for k, v in value.items() if k not in ("label", "base")}
+        try:
+            profile = load_sensing(_resolve(base, path))
+            merged = {**dataclasses.asdict(profile), **keys}
+            return label, build(SensingParams, merged, prefix=f"{where}.")
+        except ConfigError as exc:
+            raise ConfigError(exc if str(exc).startswith(where) else f"{where}: {exc}") \
+                from None
     if not isinstance(value, str):
-        raise ConfigError(f"{path}: sensing[{i}]: expected a profile name or a .toml file, got "
-                          f"{value!r}")
-    return value
+        raise ConfigError(f"{where}: expected a profile name, a .toml file or a table with "
+                          f"label and base, got {value!r}")
+    try:
+        profile = load_sensing(_resolve(value, path))
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: {exc}") from None
+    if value.endswith(".toml"):
+        digest.update(Path(_resolve(value, path)).read_bytes())
+    return Path(value).stem, profile
 
 
-def _side(value: Any, where: str) -> tuple[str, float]:
+#: A side meaning: the one the scenario (or parameter file) gives.
+OWN_SIDE = "scenario"
+
+
+def _side(value: Any, where: str) -> tuple[str, float | None]:
     if isinstance(value, str):
-        if value not in SIDES:
-            raise ConfigError(f"{where}: expected one of {', '.join(SIDES)} or a bearing in "
-                              f"rad, got {value!r}")
-        return value, SIDES[value]
+        if value not in SIDES and value != OWN_SIDE:
+            raise ConfigError(f"{where}: expected one of {', '.join(SIDES)}, {OWN_SIDE!r} or a "
+                              f"bearing in rad, got {value!r}")
+        return value, SIDES.get(value)
     return f"{_number(value, where):.4f}", float(value)
 
 
