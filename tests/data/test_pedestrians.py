@@ -28,8 +28,8 @@ from companion.data.pedestrians import (
     select_tracks,
 )
 from companion.errors import DataError
-from companion.evaluate.walkers import evaluate
-from companion.params import Params, load_sensing
+from companion.evaluate.run import run_all
+from companion.evaluate.walkers import tracks_suite
 
 SYNTHETIC = """\
 0.0\t1.0\t1.0\t2.0
@@ -158,14 +158,16 @@ def walking_tracks() -> list[Track]:
 
 
 def _format(row: dict) -> str:
-    return (f"{row['scene']}/{row['ped_id']} {row['side']}: rmse_rho={row['rmse_rho_m']:.4f} m "
+    return (f"{row['motion']} {row['side']}: rmse_rho={row['rmse_rho_m']:.4f} m "
             f"rmse_alpha={row['rmse_alpha_rad']:.4f} rad "
             f"min_dist={row['min_person_distance_m']:.3f} m finite={row['finite']}")
 
 
 @pytest.mark.parametrize("sensing", sorted(LIMITS))
 def test_real_walking(walking_tracks, sensing):
-    rows = evaluate(walking_tracks, Params(sensing=load_sensing(sensing)))
+    suite = tracks_suite(["lqr"], [sensing], every=4, data=str(default_data_dir()))
+    assert len(suite.episodes) == 2 * len(walking_tracks)      # every 4th track, both sides
+    rows = run_all(suite)
     median_rho = statistics.median(r["rmse_rho_m"] for r in rows)
     median_alpha = statistics.median(r["rmse_alpha_rad"] for r in rows)
     summary = (f"{len(rows)} runs: median rmse_rho={median_rho:.4f} m, "
