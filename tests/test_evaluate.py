@@ -93,6 +93,22 @@ def test_a_killed_run_resumes_and_gives_the_uninterrupted_results(tmp_path):
     assert _numbers(resumed) == _numbers(whole)
 
 
+def test_kept_episodes_of_another_companion_are_run_again(tmp_path, monkeypatch):
+    from companion.evaluate import run
+
+    suite = load_suite(_suite(tmp_path))
+
+    def stop(done, total):
+        raise KeyboardInterrupt
+    with pytest.raises(KeyboardInterrupt):     # the first episode is kept, then a stop
+        run_suite(suite, tmp_path / "o", workers=1,
+                  progress=lambda done, total: done >= 1 and stop(done, total))
+    monkeypatch.setattr(run, "code_digest", lambda: "an updated companion")
+    first = []
+    run_suite(suite, tmp_path / "o", workers=1, progress=lambda done, total: first.append(done))
+    assert first[0] == 0                       # nothing kept from the old code
+
+
 def _numbers(rows):
     return [{k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in r.items()}
             for r in rows]

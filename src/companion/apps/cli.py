@@ -110,12 +110,12 @@ def parser() -> argparse.ArgumentParser:
     tn = sub.add_parser("tune", help="tune a controller's parameters with Optuna on a suite "
                         "(docs/baselines.md, docs/evaluation.md)")
     tn.add_argument("controller", choices=TUNABLE)
-    tn.add_argument("--suite", default="fair-tuning", metavar="SUITE",
+    tn.add_argument("--suite", default="tune-tracks", metavar="SUITE",
                     help="evaluation suite (a shipped name or a TOML file) whose episodes of "
-                    "the controller score a trial (default fair-tuning: the procedure every "
-                    "controller is tuned with)")
-    tn.add_argument("--trials", type=int, default=64, metavar="N", help="trials in the study, "
-                    f"the budget, {rng('--trials', 'N')} (default 64)")
+                    "the controller score a trial (default tune-tracks: the procedure every "
+                    "controller is tuned with, docs/baselines.md)")
+    tn.add_argument("--trials", type=int, default=30, metavar="N", help="trials in the study, "
+                    f"the budget, {rng('--trials', 'N')} (default 30)")
     tn.add_argument("--seed", type=int, default=0, metavar="N",
                     help=f"the sampler's seed, {rng('--seed', 'N')} (default 0)")
     tn.add_argument("--storage", metavar="URL", help="Optuna storage that keeps the trials, "

@@ -39,14 +39,14 @@ def paper_lqr(params: Params) -> LqrController:
     return LqrController(paper_params(params))
 
 
-#: Q and R of our LQR after the same tuning procedure and budget as the baselines
-#: (``companion tune lqr``, docs/baselines.md).
+#: Q and R of our LQR after the same tuning as the baselines' default gains (the ideal-sensing
+#: search of docs/baselines.md).
 TUNED_LQR_Q = (109.1, 10.69, 113.6, 1.058, 8.022)
 TUNED_LQR_R = (1.566, 41.36)
 
 
 def tuned_lqr_params(params: Params) -> Params:
-    """Our LQR with Q and R from ``companion tune lqr`` instead of Table 1."""
+    """Our LQR with the tuned Q and R (:data:`TUNED_LQR_Q`) instead of Table 1's."""
     lqr = dataclasses.replace(params.lqr, q=TUNED_LQR_Q, r=TUNED_LQR_R)
     return dataclasses.replace(params, lqr=lqr)
 

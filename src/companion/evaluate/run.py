@@ -3,18 +3,24 @@ result kept as soon as it is known so that a killed run resumes where it stopped
 
 Results are kept in ``<out>/.evaluate.partial/episodes.jsonl``, one JSON line per finished
 episode, appended and flushed to disk one at a time (a line cut short by a kill is ignored).
-The file's first line holds the suite's digest; a changed suite starts over. An episode's
+The file's first line holds the suite's digest and the code's (every source file of companion,
+and the numpy and scipy versions); a changed suite or an updated companion starts over. An episode's
 result depends on its spec alone, so the same suite gives the same results whatever the
 number or kind of workers (given the same companion and libraries on every worker).
 """
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import json
 import os
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
+
+import numpy as np
+import scipy
 
 from companion.evaluate.rows import summary_row
 from companion.evaluate.suite import Suite
@@ -33,12 +39,13 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None, dask: str | N
         from companion.evaluate.dask_backend import check_address
         check_address(dask)
     store = Path(out) / PARTIAL / "episodes.jsonl"
-    kept, done = _load(store, suite.digest)
+    digest = f"{suite.digest}:{code_digest()}"
+    kept, done = _load(store, digest)
     todo = [e for e in suite.episodes if e.key not in done]
     total = len(suite.episodes)
     if progress:
         progress(total - len(todo), total)
-    with _Appender(store, suite.digest, fresh=not kept) as keep:
+    with _Appender(store, digest, fresh=not kept) as keep:
         for n, (i, result) in enumerate(_backend(dask, workers, [e.spec for e in todo],
                                                  summary_row), 1):
             done[todo[i].key] = result
@@ -46,6 +53,17 @@ def run_suite(suite: Suite, out: Path, workers: int | None = None, dask: str | N
             if progress:
                 progress(total - len(todo) + n, total)
     return suite_rows(suite, done)
+
+
+@functools.cache
+def code_digest() -> str:
+    """A digest of what computes an episode's numbers: every Python and TOML file of the
+    companion package, and the numpy and scipy versions."""
+    root = Path(__file__).resolve().parent.parent
+    h = hashlib.sha256(f"numpy {np.__version__} scipy {scipy.__version__}".encode())
+    for f in sorted(p for ext in ("*.py", "*.toml") for p in root.rglob(ext)):
+        h.update(str(f.relative_to(root)).encode() + b"\0" + f.read_bytes())
+    return h.hexdigest()
 
 
 def run_all(suite: Suite, workers: int | None = None, dask: str | None = None,

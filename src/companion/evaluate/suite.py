@@ -69,8 +69,8 @@ class Episode:
 @dataclass(frozen=True)
 class Suite:
     """A parsed suite file: its name, reference controller, episodes and a digest of every
-    file it read, scenarios and tracks included (a changed file invalidates kept results; a
-    changed companion does not: give an updated companion a new output folder)."""
+    file it read, scenarios and tracks included (a changed file invalidates kept results, as
+    does a changed companion: :func:`companion.evaluate.run.code_digest`)."""
 
     name: str
     description: str
