@@ -11,6 +11,8 @@ from companion.errors import ConfigError
 from companion.evaluate import stats
 from companion.evaluate.run import PARTIAL, run_suite
 from companion.evaluate.suite import load_suite
+from companion.params import REALISTIC
+from companion.sim.scenario import load_scenario
 
 SUITE = """
 name = "tiny"
@@ -248,3 +250,27 @@ def test_the_tracker_is_tuned_on_a_suite_with_the_same_study(tmp_path):
     assert all(d.low <= v <= d.high for d, v in zip(TRACKER_SPACE, values))
     assert tuned.best_value == min(j for _, j in tuned.history)
     assert current(Params(), TRACKER_SPACE) != values or tuned.best_value == tuned.start_value
+
+
+def test_inline_tables_for_params_sensing_and_scenarios(tmp_path):
+    """A controller's params, a sensing profile and a scenario's obstacle source may be
+    tables in the suite; they reach the episodes."""
+    path = _suite(tmp_path, """
+name = "inline"
+controllers = ["lqr",
+               {name = "lqr", label = "cautious", params = {keepout = {collision_risk = 0.1}}}]
+sensing = [{label = "noisy", person_position_noise_m = 0.1}]
+sides = ["scenario"]
+[motions]
+scenarios = [{name = "fig7", obstacles = "lidar", label = "eight"}]
+""")
+    suite = load_suite(path)
+    assert [e.key for e in suite.episodes] == ["eight:scenario:noisy:lqr:0",
+                                               "eight:scenario:noisy:cautious:0"]
+    plain, cautious = (e.spec for e in suite.episodes)
+    assert cautious.params.keepout.collision_risk == 0.1
+    assert plain.params.keepout.collision_risk == 0.0
+    assert plain.params.sensing.person_position_noise_m == 0.1
+    assert plain.params.sensing.person_latency_s == REALISTIC.person_latency_s
+    assert plain.obstacle_source == "lidar"
+    assert plain.params.formation.bearing == load_scenario("fig7").params.formation.bearing

@@ -216,7 +216,8 @@ def _controllers(items: Any, path: Path, digest: Any) -> list[tuple[str, str, di
         if "label" not in item and isinstance(given, Mapping):
             raise ConfigError(f"{at}.label: expected a label for a controller with a table of "
                               f"params")
-        label = str(item.get("label", name if given is None else f"{name}+{Path(given).stem}"))
+        label = str(item["label"] if "label" in item
+                    else name if given is None else f"{name}+{Path(given).stem}")
         out.append((label, name, overrides))
     labels = [c[0] for c in out]
     if len(set(labels)) != len(labels):
