@@ -206,6 +206,70 @@ class Split:
         return out
 
 
+#: Proxemic zones (m of gap between bodies): intimate below the first, personal up to the
+#: second (Hall's distances, as the social-navigation literature uses them).
+INTIMATE_M, PERSONAL_M = 0.45, 1.2
+#: Below this speed (m/s) the robot is standing (for the longest stop).
+STANDING_MPS = 0.05
+
+
+class Social:
+    """The social-navigation measures (docs/crowds.md) over consecutive blocks: contacts with
+    other walkers by who moved into whom, the closest gap to a walker and the time inside a
+    walker's intimate zone, the time the gap to the person lies in the intimate and in the
+    personal zone, the robot's path length, the RMS of its jerk and its longest stop."""
+
+    def __init__(self) -> None:
+        self._contacts = {1.0: 0, 2.0: 0}
+        self._min_gap: float | None = None
+        self._walker_intimate = self._intimate = self._personal = 0   # samples
+        self._length, self._jerk_sq, self._jerks = 0.0, 0.0, 0
+        self._prev: np.ndarray | None = None     # the last two rows' t, x, y, v
+        self._stop, self._longest = 0, 0          # samples standing: now, longest
+        self._dt = 0.0                            # the sample period, once two samples came
+
+    def add(self, log: Log) -> None:
+        code, gap = log["walker_contact"], log["walker_gap_m"]
+        for c in self._contacts:
+            self._contacts[c] += int(np.count_nonzero(code == c))
+        if np.any(np.isfinite(gap)):
+            low = float(np.nanmin(gap))
+            self._min_gap = low if self._min_gap is None else min(self._min_gap, low)
+        self._walker_intimate += int(np.count_nonzero(gap < INTIMATE_M))
+        person = log["person_gap_m"]
+        self._intimate += int(np.count_nonzero(person < INTIMATE_M))
+        self._personal += int(np.count_nonzero((person >= INTIMATE_M) & (person < PERSONAL_M)))
+        rows = np.vstack((log["t"], log["robot_x"], log["robot_y"], log["robot_v"]))
+        path = rows
+        if self._prev is not None:             # the last two rows of the blocks before
+            rows = np.hstack((self._prev, rows))
+            path = rows[:, len(self._prev[0]) - 1:]
+        if rows.shape[1] >= 2 and not self._dt:
+            self._dt = float(rows[0, 1] - rows[0, 0])
+        self._length += float(np.sum(np.hypot(np.diff(path[1]), np.diff(path[2]))))
+        if rows.shape[1] >= 3 and self._dt > 0:    # every window of three rows is a new one
+            jerk = np.diff(rows[3], 2) / self._dt ** 2
+            self._jerk_sq += float(np.sum(jerk * jerk))
+            self._jerks += len(jerk)
+        self._prev = rows[:, -2:]
+        for standing in np.abs(log["robot_v"]) < STANDING_MPS:
+            self._stop = self._stop + 1 if standing else 0
+            self._longest = max(self._longest, self._stop)
+
+    def value(self) -> dict:
+        dt = self._dt
+        return {"walker_contacts_robot": self._contacts[1.0],
+                "walker_contacts_walker": self._contacts[2.0],
+                "min_walker_gap_m": self._min_gap,
+                "walker_intimate_s": self._walker_intimate * dt,
+                "person_intimate_s": self._intimate * dt,
+                "person_personal_s": self._personal * dt,
+                "path_length_m": self._length,
+                "jerk_rms_mps3": math.sqrt(self._jerk_sq / self._jerks) if self._jerks
+                else 0.0,
+                "longest_stop_s": self._longest * dt}
+
+
 class Running:
     """All the metrics of :func:`compute` over consecutive blocks of one episode's log:
     ``add`` each block in order, then ``value()``. Sums of squares, minima and counts are
@@ -219,6 +283,7 @@ class Running:
         self._obstacles = Obstacles()
         self._statuses = Statuses()
         self._split = Split()
+        self._social = Social()
         self._finite = True
         self._times: list[float] = []          # the first two sample times
         self._last: tuple[float, dict] = (math.nan, {})
@@ -236,6 +301,7 @@ class Running:
         self._obstacles.add(log)
         self._statuses.add(log)
         self._split.add(log)
+        self._social.add(log)
         self._finite = self._finite and bool(np.all(np.isfinite(log["v"]))
                                              and np.all(np.isfinite(log["omega"])))
         t = log["t"]
@@ -263,6 +329,7 @@ class Running:
         values.update(self._obstacles.value())
         values.update(self._statuses.value())
         values.update(self._split.value(self.steps))
+        values.update(self._social.value())
         values["finite"] = bool(self._finite and math.isfinite(rms["rmse_rho_m"])
                                 and math.isfinite(rms["rmse_alpha_rad"]))
         return values

@@ -180,7 +180,8 @@ LOG_COLUMNS = ("t", "robot_x", "robot_y", "robot_theta", "person_x", "person_y",
                "rho_d", "alpha_d", "beta_ref", "v", "omega", "u_ob", "rho_ob",
                "robot_v", "robot_omega", "person_est_x", "person_est_y", "person_est_theta",
                "person_est_v", "person_est_omega", "person_est_std", "slot_error_m",
-               "estimate_error_m", "tracking_error_m", "safety_shift_m")
+               "estimate_error_m", "tracking_error_m", "safety_shift_m", "person_gap_m",
+               "walker_gap_m", "walker_contact")
 """Numeric columns of an episode log: the true state of robot and person, the relative state,
 ``beta_ref`` (heading offset that holding the slot needs), the command (``v``, ``omega``),
 ``u_ob`` (the avoidance part of omega, rad/s), ``rho_ob`` (clearance from the robot's

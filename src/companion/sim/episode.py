@@ -26,6 +26,7 @@ from companion.errors import ConfigError
 from companion.geometry import base_step, clearance, offset_point, unicycle_step, wrap_pi
 from companion.model import relative_state, robot_pose_at, slot_reference
 from companion.params import IDEAL, Params
+from companion.sim.crowd import WALKER_RADIUS, Crowd
 from companion.sim.faults import Fault, stalled
 from companion.sim.faults import apply as apply_faults
 from companion.sim.person import PersonMotion
@@ -33,6 +34,9 @@ from companion.sim.sensing import GroundTruth, Perception, PersonSensor, streams
 from companion.types import LOG_COLUMNS, Command, Log, Observation, Obstacle, PersonState, Pose
 
 _NO_ESTIMATE = (math.nan,) * 6
+#: Closing speed (m/s) of the robot's own motion above which a step inside the protective
+#: distance, or into a contact, is robot-caused.
+TOLERANCE = 0.01
 
 
 def start_in_slot(person: PersonState, params: Params) -> Pose:
@@ -200,7 +204,9 @@ class Simulator:
         if self.steps < 1:
             raise ConfigError(f"duration: expected at least one sample period "
                               f"({params.dt:g} s), got {duration:g} s")
-        self.person, self.params, self.start = person, params, start
+        #: A crowd scene's walkers (the person motion is then the crowd), the episode's own.
+        self.crowd = person.fresh() if isinstance(person, Crowd) else None
+        self.person, self.params, self.start = self.crowd or person, params, start
         self.obstacles, self.faults = tuple(obstacles), tuple(faults)
         self.perception = perception or GroundTruth()
         self.detections = detections
@@ -214,6 +220,9 @@ class Simulator:
         which a controller should be told (``controller.applied``)."""
         p, f = self.params, self.params.formation
         self._rng = streams(seed)
+        if self.crowd is not None:
+            self.crowd.reset(self._rng["walkers"], p.robot.radius)
+        self._walkers = _WalkerContacts(p)
         self._sensor = PersonSensor(p, self.person, self._rng["person_sensor"],
                                     self._rng["person_dropout"])
         self.perception.reset()
@@ -253,7 +262,8 @@ class Simulator:
         elif arrived:
             self._seen = (arrived[-1].x, arrived[-1].y)
         pose = Pose(self._x, self._y, self._th)
-        known = self.perception.obstacles(self.k, pose, self.obstacles, (h.x, h.y), self._seen,
+        world = self.obstacles if self.crowd is None else self.obstacles + self.crowd.circles()
+        known = self.perception.obstacles(self.k, pose, world, (h.x, h.y), self._seen,
                                           self._rng["lidar"])
         obs = Observation(t, pose, None if self.detections else h, known,
                           self.perception.scan(), (self._va, self._wa), arrived)
@@ -288,12 +298,43 @@ class Simulator:
         self.row = ((t, x, y, th, h.x, h.y, h.theta, h.v, h.omega, rho, alpha, beta,
                      f.distance, f.bearing, beta_ref, cmd.v, cmd.omega, cmd.u_ob,
                      nearest_clearance(x, y, self.obstacles, p.robot.radius), va, wa, *est,
-                     *error_split(Pose(x, y, th), h, cmd, p)), cmd.status, cmd.reason)
+                     *error_split(Pose(x, y, th), h, cmd, p),
+                     math.hypot(h.x - x, h.y - y) - p.robot.radius - p.lidar.person_radius,
+                     *self._walkers.sample(x, y, self.crowd)), cmd.status, cmd.reason)
+        if self.crowd is not None:
+            self.crowd.step((x, y, va * math.cos(th), va * math.sin(th)))
         x, y, th, self._va, self._wa = base_step(x, y, th, va, wa, *self._base,
                                                  p.sensing.actuator_tau_s, p.dt)
         self._x, self._y, self._th = x, y, wrap_pi(th)
         self.k += 1
         return self._observe() if self.k < self.steps else None
+
+
+class _WalkerContacts:
+    """Per sample: the gap from the robot's footprint to the nearest walker's body (m, NaN
+    without walkers) and whether a contact with a walker begins (1: the robot's own motion
+    over the last period closed on that walker, as the fuzz counts robot-caused contacts;
+    2: the walker's doing; 0: none)."""
+
+    def __init__(self, params: Params):
+        self.radius, self.dt = params.robot.radius, params.dt
+        self._before: tuple[float, float, np.ndarray, np.ndarray] | None = None
+
+    def sample(self, x: float, y: float, crowd: Crowd | None) -> tuple[float, float]:
+        if crowd is None or crowd.n == 0:
+            return math.nan, 0.0
+        walkers = crowd.positions[:-1]
+        gaps = np.hypot(walkers[:, 0] - x, walkers[:, 1] - y) - self.radius - WALKER_RADIUS
+        code = 0.0
+        if self._before is not None:
+            bx, by, was, where = self._before
+            entered = np.flatnonzero((gaps < 0.0) & (was >= 0.0))
+            if len(entered):
+                own = (np.hypot(where[entered, 0] - bx, where[entered, 1] - by)
+                       - np.hypot(where[entered, 0] - x, where[entered, 1] - y)) / self.dt
+                code = 1.0 if np.any(own > TOLERANCE) else 2.0
+        self._before = (x, y, gaps, walkers.copy())
+        return float(gaps.min()), code
 
 
 class _Block:

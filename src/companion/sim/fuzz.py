@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.params import PROFILES, Formation, Params, SensingParams
-from companion.sim.episode import start_in_slot
+from companion.sim.episode import TOLERANCE, start_in_slot
 from companion.sim.escape import escapable
 from companion.sim.runner import EpisodeSpec
 from companion.sim.soak import PILLAR_RADIUS, Walker, arena_walls, pillars, random_walk
@@ -45,9 +45,6 @@ START_OMEGA = (-1.0, 1.0)
 START_ROOM = 0.15
 #: Episode seeds: run ``seed`` uses ``seed * SEED_STRIDE + i`` for its i-th episode.
 SEED_STRIDE = 10_000_000
-#: Closing speed (m/s) of the robot's own motion above which a step inside the protective
-#: distance is robot-caused.
-TOLERANCE = 0.01
 START_KINDS = ("slot", "rest", "moving")
 
 #: The sensing profiles the fuzz runs unless told otherwise: the paper's setting and a leg

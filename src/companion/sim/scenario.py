@@ -67,6 +67,8 @@ from companion.control import lookup
 from companion.errors import ConfigError
 from companion.model import relative_state
 from companion.params import LEFT, RIGHT, Params, params_from_mapping, sensing_params
+from companion.sim.crowd import Crowd
+from companion.sim.crowd_scenes import SCENES
 from companion.sim.faults import Fault, faults_from_list
 from companion.sim.person import Figure8, PersonMotion, Segment, SegmentPath, circle, line, u_shape
 from companion.sim.recorded import load_person_csv
@@ -271,7 +273,25 @@ class Scenario:
 
 
 TOP_KEYS = ("name", "description", "duration", "seed", "controller", "obstacle_source",
-            "sensing", "person", "robot", "obstacles", "params", "faults")
+            "sensing", "person", "crowd", "robot", "obstacles", "params", "faults")
+CROWD_KEYS = ("scene", "walkers")
+
+
+def crowd_from(data: Any, dt: float, where: str) -> Crowd:
+    """The ``[crowd]`` table: a built-in crowd scene and how many walkers besides the person
+    (docs/crowds.md)."""
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"{where}crowd: expected a table with scene and walkers")
+    reject_unknown(data, CROWD_KEYS, f"{where}crowd.")
+    scene = data.get("scene")
+    if scene not in SCENES:
+        raise ConfigError(f"{where}crowd.scene: expected one of {', '.join(SCENES)}, got "
+                          f"{scene!r}")
+    walkers = data.get("walkers", 10)
+    if isinstance(walkers, bool) or not isinstance(walkers, int) or not 0 <= walkers <= 60:
+        raise ConfigError(f"{where}crowd.walkers: expected an integer in [0, 60], got "
+                          f"{walkers!r}")
+    return Crowd(SCENES[scene], walkers, dt=dt)
 
 
 def _resolve_auto_side(params_map: dict, start: Pose | None, person: PersonMotion,
@@ -325,10 +345,14 @@ def scenario_from_mapping(data: Mapping[str, Any], source: str, base_dir: Path,
         lookup(controller)
     except ConfigError as exc:
         raise ConfigError(f"{where}{exc}") from None
-    if "person" not in data:
-        raise ConfigError(f"{where}person: missing table [person]")
-    spec = person_spec(data["person"], where)
-    person = make_person(spec, base_dir)
+    if "crowd" in data and "person" in data:
+        raise ConfigError(f"{where}person: a crowd scene walks its own person; expected "
+                          f"[person] or [crowd], not both")
+    if "person" not in data and "crowd" not in data:
+        raise ConfigError(f"{where}person: missing table [person] (or [crowd])")
+    spec = person_spec(data["person"], where) if "person" in data else None
+    person: PersonMotion = make_person(spec, base_dir) if spec is not None \
+        else crowd_from(data["crowd"], Params().dt, where)
     robot = data.get("robot", {})
     if not isinstance(robot, Mapping):
         raise ConfigError(f"{where}robot: expected a table")
@@ -349,11 +373,16 @@ def scenario_from_mapping(data: Mapping[str, Any], source: str, base_dir: Path,
             params = params.replace(sensing=sensing)
         except ConfigError as exc:        # a check across sections
             raise ConfigError(f"{where}{exc}") from None
-    check_turn_rate(spec, params.tracker.max_person_turn_rate, where)
+    if spec is not None:
+        check_turn_rate(spec, params.tracker.max_person_turn_rate, where)
+    else:
+        person = crowd_from(data["crowd"], params.dt, where)
     if duration < params.dt:
         raise ConfigError(f"{where}duration: expected at least one sample period "
                           f"(params.dt = {params.dt:g} s), got {duration!r}")
     obstacles = obstacles_from_list(data.get("obstacles", []), where)
+    if isinstance(person, Crowd):
+        obstacles += person.walls
     obstacle_source = check_source(data.get("obstacle_source", "truth"), where)
     faults = faults_from_list(data.get("faults", []), f"{where}faults")
     return Scenario(name, description, float(duration), seed, controller, person, start,

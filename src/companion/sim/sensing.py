@@ -26,7 +26,7 @@ from companion.types import Circle, Obstacle, PersonDetection, PersonState, Pose
 
 #: The noise sources of an episode, in the order their streams are spawned (a new source goes
 #: at the end, so that the others keep their streams).
-SOURCES = ("person_sensor", "person_dropout", "lidar")
+SOURCES = ("person_sensor", "person_dropout", "lidar", "walkers")
 
 
 def streams(seed: int) -> dict[str, np.random.Generator]:
