@@ -86,6 +86,9 @@ def main() -> None:
              f"{sum(int(r['walker_contacts_robot']) for r in lqr)}"),
             ("corridor and doorway without a stop longer than 2 s", stop <= 2.0,
              f"longest {stop:.1f} s"),
+            ("through the door and the corridor (a robot path of at least 30 m)",
+             all(r["path_length_m"] >= 30.0 for r in passage),
+             f"{sum(r['path_length_m'] >= 30.0 for r in passage)}/{len(passage)}"),
             ("never within 0.5 m of the person", not near, f"{len(near)} episodes"),
         ]:
             print(f"  {'PASS' if good else 'MISS'}  {text}: {value}")
