@@ -8,7 +8,9 @@ and the person estimate. Per call:
 
 1. clock (:class:`~companion.control.checks.Clock`);
 2. the person: detections to the tracker (:class:`~companion.tracking.PersonTracker`), the
-   one place that decides whether the person is seen, predicted or lost;
+   one place that decides whether the person is seen, predicted or lost; a lost person
+   means a controlled stop, then (``search.max_time_s`` > 0) a search
+   (:class:`~companion.control.search.Search`);
 3. robot pose, obstacles and scan (:mod:`companion.control.checks`);
 4. the wrapped controller, on a checked observation predicted to the moment its command takes
    effect (the actuator lag on), the same for every controller;
@@ -32,6 +34,7 @@ from companion.control.base import Controller, saturate
 from companion.control.delays import DelayMeter
 from companion.control.keepout import keep_out
 from companion.control.limits import limit
+from companion.control.search import Search
 from companion.control.slot import reference_point, slot_point
 from companion.geometry import unicycle_step, wrap_pi
 from companion.params import Params
@@ -55,6 +58,7 @@ class SafetySupervisor:
         self._odometry = checks.Odometry(params.robot)
         self._tracker = PersonTracker(params.tracker, params.sensing)
         self.delays = DelayMeter(params)
+        self._search = Search(params)
         self.reset()
 
     def reset(self) -> None:
@@ -70,6 +74,8 @@ class SafetySupervisor:
         self._sensor_t = 0.0          # the sensor clock: the last valid time, periods counted on
         self._poses: deque[tuple[float, Pose]] = deque()   # for robot-frame detections
         self._far_since: float | None = None               # the slot error is large since
+        self._last: PersonEstimate | None = None           # the last estimate of the person
+        self._search.reset()
 
     def step(self, obs: Observation) -> Command:
         p = self.params
@@ -93,8 +99,17 @@ class SafetySupervisor:
             stop = "+".join(f"{source}_stale" for source in obs.stale)
         elif not checks.pose_is_finite(obs.robot):
             stop = "robot_pose_invalid"
-        elif estimate is None:
-            stop = "reacquiring" if self._tracker.reacquiring else "person_lost"
+        lost = False
+        if not stop and estimate is None:
+            if self._tracker.reacquiring:
+                stop = "reacquiring"
+            elif p.search.max_time_s > 0.0:
+                lost = True           # the other checks first; then stop or search below
+            else:
+                stop = "person_lost"
+        if estimate is not None:
+            self._last = estimate
+            self._search.reset()
         obstacles = tuple(ob for ob in obs.obstacles if checks.obstacle_is_finite(ob))
         if len(obstacles) < len(obs.obstacles):
             reasons.append("obstacle_invalid")
@@ -113,13 +128,21 @@ class SafetySupervisor:
                                velocity if measured else None)
         if measured and not self._started:   # rate limits start from the measured velocity
             self._prev, self._started = saturate(*velocity, self.params.robot), True
+        searching = None
+        if lost and not stop:
+            searching = self._searching(obs, obstacles, velocity) if fresh else None
+            stop = "" if searching is not None else "person_lost"
         run = self.delays.params(p) if p.supervisor.delays == "measured" else p
 
         stepped = False
         target = (*self._prev, 0.0)
         if odometry:
             self._inner_fresh = True  # the controller's filters knew the pose before it
-        if not stop and fresh and not odometry:
+        if searching is not None:
+            target = (searching[0], searching[1], 0.0)
+            reasons += ["person_lost", searching[2]]
+            self._inner_fresh = True      # the controller's filters knew the person before
+        elif not stop and fresh and not odometry:
             if self._inner_fresh:
                 self.inner.reset()
                 self._inner_fresh = False
@@ -134,7 +157,7 @@ class SafetySupervisor:
             target = (0.0, 0.0, 0.0)
             self._inner_fresh = True
             self._far_since = None    # a stop restarts the slot-error clock
-        else:
+        elif searching is None:
             self._check_slot(obs.robot, estimate, reasons)
             if stepped:
                 requested = limit(target[:2], self._prev, p)
@@ -163,11 +186,25 @@ class SafetySupervisor:
         limits carry the robot from its last command towards the new slot; ``inner`` starts
         fresh at the next step. Parameters of the clock and tracker must not change."""
         self.inner, self.params = inner, params
+        self._search.params = params
         self._odometry.robot = params.robot
         self._inner_fresh = True
         self._far_since = None
 
     # -- the pieces -----------------------------------------------------------------------
+
+    def _searching(self, obs: Observation, obstacles: tuple, velocity: tuple[float, float]
+                   ) -> tuple[float, float, str] | None:
+        """The search's command for a lost person (None: stop and hold): it begins once the
+        controlled stop has brought the robot to rest."""
+        s = self.params.search
+        if s.max_time_s <= 0.0 or self._last is None or self._search.over:
+            return None
+        if not self._search.active:
+            if abs(self._prev[0]) > 0.05 or abs(self._prev[1]) > 0.1:
+                return None                   # the controlled stop first
+            self._search.begin(obs.t, obs.robot, self._last)
+        return self._search.target(obs.t, obs.robot, obstacles, velocity[0])
 
     def _detections(self, obs: Observation) -> tuple[PersonDetection, ...]:
         """The observation's detections; a ``person`` given is an exact detection now."""

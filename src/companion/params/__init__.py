@@ -28,6 +28,7 @@ from companion.params.control import (
     LqrParams,
     PidParams,
     RobotParams,
+    SearchParams,
     SupervisorParams,
     VsmParams,
 )
@@ -42,7 +43,7 @@ from companion.params.sensing import (
 )
 
 __all__ = ["BEHIND", "FRONT", "IDEAL", "LEFT", "PROFILES", "REALISTIC", "RIGHT", "SIDES",
-           "AvoidanceParams", "ExtractorParams", "Formation", "ImpedanceParams",
+           "AvoidanceParams", "ExtractorParams", "Formation", "ImpedanceParams", "SearchParams",
            "KeepOutParams", "LidarParams", "LqrParams", "Params", "PidParams", "RobotParams",
            "SensingParams", "SupervisorParams", "TrackerParams", "VsmParams", "load_params",
            "load_sensing", "params_from_mapping", "sensing_params", "side_to_bearing"]
@@ -64,6 +65,7 @@ class Params(Validated):
     lqr: LqrParams = param(LqrParams(), "", "")
     keepout: KeepOutParams = param(KeepOutParams(), "", "")
     supervisor: SupervisorParams = param(SupervisorParams(), "", "")
+    search: SearchParams = param(SearchParams(), "", "")
     sensing: SensingParams = param(IDEAL, "", "")
     tracker: TrackerParams = param(TrackerParams(), "", "")
     avoidance: AvoidanceParams = param(AvoidanceParams(), "", "")

@@ -1,0 +1,85 @@
+"""Looking for a lost person (docs/safety.md, "Losing and finding the person").
+
+Once the supervisor has brought the robot to a stop for a person the tracker lost, a
+:class:`Search` (when ``search.max_time_s`` > 0) takes it through three phases, each named in
+the status reason:
+
+1. ``search_turn``: turn on the spot to face where the person was going (the last estimate
+   walked on at its velocity for ``search.horizon_s``);
+2. ``search_approach``: move there at up to ``search.speed``, never faster than the braking
+   bound of every obstacle it sees (it can always stop short of them), until within
+   ``search.arrive_m``;
+3. ``search_scan``: turn on the spot.
+
+The search ends after ``search.max_time_s`` or once the robot is ``search.max_distance_m``
+from where it stopped; then it holds. Detections that the tracker accepts end it at once.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from companion.control.keepout import clip_to, obstacle_bounds
+from companion.geometry import wrap_pi
+from companion.params import Params
+from companion.types import Obstacle, PersonEstimate, Pose
+
+#: Heading error (rad) below which the robot faces the goal; the turn's gain (1/s).
+FACING, TURN_GAIN = 0.2, 2.0
+
+
+def search_goal(last: PersonEstimate, horizon: float) -> tuple[float, float]:
+    """Where the person was going: the last estimate walked on for ``horizon`` seconds."""
+    s = last.state
+    return s.x + s.v * math.cos(s.theta) * horizon, s.y + s.v * math.sin(s.theta) * horizon
+
+
+class Search:
+    """The search of one loss (module docstring): :meth:`begin`, then :meth:`target` each
+    period until it returns None."""
+
+    def __init__(self, params: Params):
+        self.params = params
+        self.reset()
+
+    def reset(self) -> None:
+        self._goal: tuple[float, float] | None = None
+        self._t0 = 0.0
+        self._from = (0.0, 0.0)
+        self._scan = 1.0
+        self.over = False
+
+    @property
+    def active(self) -> bool:
+        return self._goal is not None and not self.over
+
+    def begin(self, t: float, robot: Pose, last: PersonEstimate) -> None:
+        s = self.params.search
+        self._goal = search_goal(last, s.horizon_s)
+        self._t0, self._from, self.over = t, (robot.x, robot.y), False
+        bearing = wrap_pi(math.atan2(self._goal[1] - robot.y, self._goal[0] - robot.x)
+                          - robot.theta)
+        self._scan = 1.0 if bearing >= 0.0 else -1.0
+
+    def target(self, t: float, robot: Pose, obstacles: Sequence[Obstacle], v_now: float
+               ) -> tuple[float, float, str] | None:
+        """``(v, omega, phase)`` for this period, or None once the search is over."""
+        s, p = self.params.search, self.params
+        if self._goal is None or self.over:
+            return None
+        if t - self._t0 > s.max_time_s or math.hypot(robot.x - self._from[0],
+                                                     robot.y - self._from[1]) > s.max_distance_m:
+            self.over = True
+            return None
+        gx, gy = self._goal
+        dist = math.hypot(gx - robot.x, gy - robot.y)
+        error = wrap_pi(math.atan2(gy - robot.y, gx - robot.x) - robot.theta)
+        turn = max(-s.turn_rate, min(s.turn_rate, TURN_GAIN * error))
+        if dist <= s.arrive_m:
+            return 0.0, self._scan * s.turn_rate, "search_scan"
+        if abs(error) > FACING:
+            return 0.0, turn, "search_turn"
+        v = clip_to(min(s.speed, p.robot.v_max) * math.cos(error),
+                    obstacle_bounds(robot, obstacles, p, v_now), p.robot.v_max)
+        return v, turn, "search_approach"
