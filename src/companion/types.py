@@ -163,7 +163,8 @@ class Command:
     "degraded" or "stopped"), ``reason`` (empty when ok), ``estimate`` (the person estimate
     the command was made for) and ``requested`` (the wrapped controller's ``(v, omega)``
     within the rate limits, before the keep-out changed it; None without a controller step)
-    are set by the safety supervisor.
+    and ``bearing`` (the formation's bearing in force, rad, where a formation policy changed
+    it; None: the configured one) are set by the safety supervisor.
     """
 
     v: float
@@ -173,6 +174,7 @@ class Command:
     reason: str = ""
     estimate: PersonEstimate | None = None
     requested: tuple[float, float] | None = None
+    bearing: float | None = None
 
 
 LOG_COLUMNS = ("t", "robot_x", "robot_y", "robot_theta", "person_x", "person_y",

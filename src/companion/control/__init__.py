@@ -7,6 +7,7 @@ stack every one of them runs in: safety supervisor -> avoidance layer -> control
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -87,18 +88,24 @@ def make_controller(name: str, params: Params) -> SafetySupervisor:
     """The standard stack of the registered controller ``name``: the safety supervisor around
     the avoidance layer (the same module for every controller, as in the paper's Fig. 4)
     around the controller."""
+    return SafetySupervisor(avoiding(name, params), lookup(name).adjust(params),
+                            functools.partial(avoiding, name))
+
+
+def avoiding(name: str, params: Params) -> AvoidingController:
+    """The avoidance layer around the registered controller ``name`` made for ``params``:
+    what the safety supervisor wraps (and makes anew when a formation policy changes the
+    bearing)."""
     entry = lookup(name)
     params = entry.adjust(params)
-    return SafetySupervisor(AvoidingController(entry.factory(params), params), params)
+    return AvoidingController(entry.factory(params), params)
 
 
 def retune(stack: SafetySupervisor, name: str, params: Params) -> None:
     """Give the running stack of controller ``name`` new parameters (docs/ros2.md, "Parameters
     while running"): the controller and the avoidance layer are made anew with them, the
     supervisor keeps its tracker and its last command (:meth:`SafetySupervisor.retune`)."""
-    entry = lookup(name)
-    params = entry.adjust(params)
-    stack.retune(AvoidingController(entry.factory(params), params), params)
+    stack.retune(avoiding(name, params), lookup(name).adjust(params))
 
 
 __all__ = ["AvoidingController", "CONTROLLERS", "Controller", "ImpedanceController",

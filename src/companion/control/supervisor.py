@@ -26,12 +26,15 @@ Steps 4 and 5 use the detection latency and actuator lag measured by
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import deque
+from collections.abc import Callable
 
 from companion.control import checks
 from companion.control.base import Controller, saturate
 from companion.control.delays import DelayMeter
+from companion.control.formation import FormationPolicy
 from companion.control.keepout import keep_out
 from companion.control.limits import limit
 from companion.control.search import Search
@@ -51,9 +54,13 @@ class SafetySupervisor:
     #: The simulator hands this layer the raw person detections (it tracks the person).
     takes_detections = True
 
-    def __init__(self, inner: Controller, params: Params):
+    def __init__(self, inner: Controller, params: Params,
+                 rebuild: Callable[[Params], Controller] | None = None):
         self.inner = inner
         self.params = params
+        self._configured = params     # the parameters as given; ``params``: those in force
+        self._rebuild = rebuild       # the inner controller for other parameters
+        self._formation = FormationPolicy(params.formation.bearing)
         self._clock = checks.Clock(params.dt, params.supervisor.max_step_ratio)
         self._odometry = checks.Odometry(params.robot)
         self._tracker = PersonTracker(params.tracker, params.sensing)
@@ -62,6 +69,10 @@ class SafetySupervisor:
         self.reset()
 
     def reset(self) -> None:
+        if self.params is not self._configured and self._rebuild is not None:
+            self.inner, self.params = self._rebuild(self._configured), self._configured
+            self._search.params = self.params
+        self._formation.reset()
         self.inner.reset()
         self._inner_fresh = False     # inner must be reset before its next step
         self._prev = (0.0, 0.0)       # last output (v, omega)
@@ -110,6 +121,10 @@ class SafetySupervisor:
         if estimate is not None:
             self._last = estimate
             self._search.reset()
+            if not stop and p.formation.policy == "adaptive" and self._rebuild is not None:
+                bearing = self._formation.update(obs.robot, estimate.walker)
+                if bearing != p.formation.bearing:
+                    p = self._switch(bearing)
         obstacles = tuple(ob for ob in obs.obstacles if checks.obstacle_is_finite(ob))
         if len(obstacles) < len(obs.obstacles):
             reasons.append("obstacle_invalid")
@@ -171,7 +186,8 @@ class SafetySupervisor:
             self.inner.applied(final)
         status = STOPPED if stop else DEGRADED if reasons else OK
         reason = "+".join(dict.fromkeys([stop] * bool(stop) + reasons))
-        return Command(final.v, final.omega, final.u_ob, status, reason, estimate, requested)
+        return Command(final.v, final.omega, final.u_ob, status, reason, estimate, requested,
+                       p.formation.bearing)
 
     def applied(self, cmd: Command) -> None:
         """Told the command the robot executes outside a step (its velocity at the start of an
@@ -185,13 +201,25 @@ class SafetySupervisor:
         ``inner`` made with them: the tracker, the clock and the last command stay, so the rate
         limits carry the robot from its last command towards the new slot; ``inner`` starts
         fresh at the next step. Parameters of the clock and tracker must not change."""
-        self.inner, self.params = inner, params
+        self.inner, self.params, self._configured = inner, params, params
+        self._formation = FormationPolicy(params.formation.bearing)
         self._search.params = params
         self._odometry.robot = params.robot
         self._inner_fresh = True
         self._far_since = None
 
     # -- the pieces -----------------------------------------------------------------------
+
+    def _switch(self, bearing: float) -> Params:
+        """Put the formation's ``bearing`` in force (the adaptive policy chose the other
+        side): the inner controller is made anew for it and starts fresh; the rate limits
+        carry the robot on from its last command."""
+        f = self._configured.formation
+        self.params = self._configured.replace(formation=dataclasses.replace(f, bearing=bearing))
+        self.inner = self._rebuild(self.params)
+        self._search.params = self.params
+        self._inner_fresh = True
+        return self.params
 
     def _searching(self, obs: Observation, obstacles: tuple, velocity: tuple[float, float]
                    ) -> tuple[float, float, str] | None:

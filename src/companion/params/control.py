@@ -73,6 +73,11 @@ class Formation(Validated):
                            "desired bearing alpha_d of R from the person's heading, in [0, 2*pi): "
                            "left pi/2, behind pi, right 3*pi/2, front 0. TOML also accepts "
                            "\"left\", \"right\", \"behind\", \"front\"", _bearing)
+    policy: str = param("fixed", "-", "'fixed': the bearing as given (the paper's); "
+                        "'adaptive': beside the person (left or right), the robot takes the "
+                        "side it is on when it first sees the person and when the person "
+                        "turns round, instead of crossing over (companion.control.formation)",
+                        choices=("fixed", "adaptive"))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -15,6 +15,7 @@ deterministic for a given seed.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Iterator, Sequence
 
@@ -284,7 +285,7 @@ class Simulator:
         elif t - self._last_command >= p.robot.command_timeout_s - 1e-9:
             self._base = timed_out(self._base, p)
             self._cmd = Command(*self._base, 0.0, "stopped", "command_timeout",
-                                self._cmd.estimate)
+                                self._cmd.estimate, bearing=self._cmd.bearing)
         cmd = self._cmd
         e = cmd.estimate
         if e is not None and self.detections:
@@ -293,6 +294,9 @@ class Simulator:
                                               e.state.omega, e.position_std)
         x, y, th, va, wa = self._x, self._y, self._th, self._va, self._wa
         h = self.person.state(t)
+        if cmd.bearing is not None and cmd.bearing != f.bearing:   # a formation policy's
+            p = p.replace(formation=dataclasses.replace(f, bearing=cmd.bearing))
+            f = p.formation
         rho, alpha, beta = relative_state(x, y, th, h.x, h.y, h.theta, d)
         beta_ref = slot_reference(h.v, h.omega, f.distance, f.bearing, d).beta
         self.row = ((t, x, y, th, h.x, h.y, h.theta, h.v, h.omega, rho, alpha, beta,

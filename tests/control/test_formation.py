@@ -1,0 +1,75 @@
+"""The adaptive formation policy: the side the robot is on at the start and after the person
+turns round, never on a gradual turn; the fixed policy (the paper's) as before."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from companion import metrics
+from companion.control.formation import FormationPolicy, side_of
+from companion.params import BEHIND, LEFT, RIGHT, Params
+from companion.sim.crowd import Crowd
+from companion.sim.crowd_scenes import SCENES
+from companion.sim.person import circle, line
+from companion.sim.runner import EpisodeSpec, run_one
+from companion.types import PersonState, Pose
+
+
+def _params(policy: str, bearing: float = LEFT) -> Params:
+    p = Params()
+    return p.replace(formation=dataclasses.replace(p.formation, policy=policy,
+                                                   bearing=bearing))
+
+
+def test_the_policy_takes_the_robots_side_at_first_and_after_a_turnaround_only():
+    walking = PersonState(0.0, 0.0, 0.0, 1.0, 0.0)
+    assert side_of(Pose(0.0, 1.0, 0.0), walking) == 1.0
+    assert side_of(Pose(0.0, -1.0, 0.0), walking) == -1.0
+    policy = FormationPolicy(LEFT)
+    assert policy.update(Pose(0.0, -1.0, 0.0), walking) == RIGHT      # it starts on the right
+    turned = dataclasses.replace(walking, theta=2.0)                    # a turn, not round
+    assert policy.update(Pose(0.0, 1.0, 0.0), turned) == RIGHT
+    back = dataclasses.replace(walking, theta=math.pi)                  # turned round
+    assert policy.update(Pose(0.0, -1.0, 0.0), back) == LEFT            # now on its left
+    assert policy.update(Pose(0.0, -1.0, 0.0), dataclasses.replace(back, v=0.0)) == LEFT
+    assert FormationPolicy(BEHIND).update(Pose(0.0, -1.0, 0.0), walking) == BEHIND
+
+
+def _turnaround(policy: str):
+    p = _params(policy)
+    return run_one(EpisodeSpec("lqr", Crowd(SCENES["turnaround"], 0, dt=p.dt), p, 35.0)), p
+
+
+def test_at_a_turnaround_the_adaptive_robot_switches_side_instead_of_running_round():
+    adaptive, p = _turnaround("adaptive")
+    fixed, _ = _turnaround("fixed")
+    switches = np.flatnonzero(np.abs(np.diff(adaptive["alpha_d"])) > 0.1)
+    assert len(switches) == 1
+    assert adaptive["alpha_d"][0] == pytest.approx(LEFT)
+    assert adaptive["alpha_d"][-1] == pytest.approx(RIGHT)
+    assert np.all(fixed["alpha_d"] == LEFT)
+    assert adaptive["robot_y"].min() > 0.0 > fixed["robot_y"][-1]       # it never crossed
+    a, f = metrics.compute(adaptive), metrics.compute(fixed)
+    assert a["rms_slot_error_m"] < 0.6 * f["rms_slot_error_m"]
+    assert a["path_length_m"] < f["path_length_m"]
+    assert a["min_person_distance_m"] >= 0.5
+    dv = np.abs(np.diff(adaptive["v"]))                                 # no jump in command
+    assert np.all(dv <= max(p.supervisor.accel_max, p.supervisor.decel_max) * p.dt + 1e-9)
+
+
+def test_started_on_the_other_side_the_adaptive_robot_stays_there():
+    start = Pose(0.0, -1.0, 0.0)                     # right of a person walking along +x
+    runs = {policy: run_one(EpisodeSpec("lqr", line((0.25, 0.0, 0.0), 0.8),
+                                        _params(policy), 15.0, start=start))
+            for policy in ("adaptive", "fixed")}
+    assert np.all(runs["adaptive"]["alpha_d"] == RIGHT)
+    assert runs["adaptive"]["robot_y"].max() < 0.0
+    assert runs["fixed"]["robot_y"][-1] > 0.0        # crossed over to the left
+
+
+def test_a_gradual_turn_never_switches():
+    log = run_one(EpisodeSpec("lqr", circle((0.0, 0.0, 0.0), 3.0, 1.0, "left"),
+                              _params("adaptive"), 40.0))
+    assert np.all(log["alpha_d"] == LEFT)
