@@ -76,7 +76,8 @@ def test_list_follows_rclpys_prefix_and_depth_rules(rig):
     assert list(top.names) == ["use_sim_time", "dt", "controller"]
     formation = call(client, "list_parameters", "ListParameters", prefixes=["formation"],
                      depth=0).result
-    assert list(formation.names) == ["formation.distance", "formation.bearing"]
+    assert list(formation.names) == ["formation.distance", "formation.bearing",
+                                     "formation.policy"]
     shallow = call(client, "list_parameters", "ListParameters", prefixes=["ros"],
                    depth=1).result
     assert "ros.node_name" in shallow.names and "ros.topics.odom" not in shallow.names
