@@ -8,13 +8,14 @@ import numpy as np
 import pytest
 
 from companion import metrics
-from companion.control.formation import FormationPolicy, side_of
+from companion.control.formation import BEARING_RATE, FormationPolicy, side_of, side_room
 from companion.params import BEHIND, LEFT, RIGHT, Params
 from companion.sim.crowd import Crowd
 from companion.sim.crowd_scenes import SCENES
 from companion.sim.person import circle, line
 from companion.sim.runner import EpisodeSpec, run_one
-from companion.types import PersonState, Pose
+from companion.sim.scenario import load_scenario
+from companion.types import Circle, PersonState, Pose, Wall
 
 
 def _params(policy: str, bearing: float = LEFT) -> Params:
@@ -27,14 +28,15 @@ def test_the_policy_takes_the_robots_side_at_first_and_after_a_turnaround_only()
     walking = PersonState(0.0, 0.0, 0.0, 1.0, 0.0)
     assert side_of(Pose(0.0, 1.0, 0.0), walking) == 1.0
     assert side_of(Pose(0.0, -1.0, 0.0), walking) == -1.0
-    policy = FormationPolicy(LEFT)
+    policy = FormationPolicy(_params("adaptive"))
     assert policy.update(Pose(0.0, -1.0, 0.0), walking) == RIGHT      # it starts on the right
     turned = dataclasses.replace(walking, theta=2.0)                    # a turn, not round
     assert policy.update(Pose(0.0, 1.0, 0.0), turned) == RIGHT
     back = dataclasses.replace(walking, theta=math.pi)                  # turned round
     assert policy.update(Pose(0.0, -1.0, 0.0), back) == LEFT            # now on its left
     assert policy.update(Pose(0.0, -1.0, 0.0), dataclasses.replace(back, v=0.0)) == LEFT
-    assert FormationPolicy(BEHIND).update(Pose(0.0, -1.0, 0.0), walking) == BEHIND
+    assert FormationPolicy(_params("adaptive", BEHIND)).update(Pose(0.0, -1.0, 0.0),
+                                                               walking) == BEHIND
 
 
 def _turnaround(policy: str):
@@ -73,3 +75,34 @@ def test_a_gradual_turn_never_switches():
     log = run_one(EpisodeSpec("lqr", circle((0.0, 0.0, 0.0), 3.0, 1.0, "left"),
                               _params("adaptive"), 40.0))
     assert np.all(log["alpha_d"] == LEFT)
+
+
+def test_side_room_sees_a_door_ahead_and_a_wall_beside():
+    walking = PersonState(12.5, 0.0, 0.0, 1.0, 0.0)
+    door = (Wall(15.0, -6.0, 15.0, -0.8), Wall(15.0, 0.8, 15.0, 6.0))
+    assert side_room(walking, 1.0, door) == pytest.approx(0.8)
+    assert side_room(walking, -1.0, door) == pytest.approx(0.8)
+    assert side_room(dataclasses.replace(walking, x=10.0), 1.0, door) == math.inf  # 5 m away
+    assert side_room(walking, 1.0, (Wall(10.0, 1.5, 20.0, 1.5),)) == pytest.approx(1.5)
+    assert side_room(walking, 1.0, (Wall(14.0, -1.0, 14.0, 1.0),)) == 0.0   # across the way
+    assert side_room(walking, 1.0, (Circle(13.0, 1.2, 0.3),)) == pytest.approx(0.9)
+    assert side_room(walking, -1.0, (Circle(13.0, 1.2, 0.3),)) == math.inf
+
+
+def test_through_a_door_the_adaptive_robot_falls_in_behind_and_returns_to_the_side():
+    sc = load_scenario("crowd-doorway")
+    runs = {}
+    for policy in ("fixed", "adaptive"):
+        p = sc.params.replace(formation=dataclasses.replace(sc.params.formation, policy=policy))
+        runs[policy] = run_one(EpisodeSpec("lqr", Crowd(SCENES["doorway"], 0, dt=p.dt), p,
+                                           35.0, obstacles=sc.obstacles))
+    adaptive, fixed = runs["adaptive"], runs["fixed"]
+    bearing = adaptive["alpha_d"]
+    assert bearing.max() == pytest.approx(BEHIND) and bearing[-1] == pytest.approx(LEFT)
+    assert np.abs(np.diff(bearing)).max() <= BEARING_RATE * p.dt + 1e-9   # the slot moves on
+    behind = adaptive["robot_x"][np.argmax(bearing)]
+    assert 10.0 < behind < 16.0                                  # at the door
+    a, f = metrics.compute(adaptive), metrics.compute(fixed)
+    assert a["path_length_m"] > 30.0 > f["path_length_m"]       # through, not stuck
+    assert a["obstacle_collisions"] == 0 and a["min_person_distance_m"] >= 0.5
+    assert adaptive["slot_error_m"][-1] < 0.2 < fixed["slot_error_m"][-1]

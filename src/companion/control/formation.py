@@ -1,26 +1,41 @@
-"""The adaptive formation policy (``formation.policy = "adaptive"``, docs/safety.md): beside
-the person, take the side the robot is on instead of crossing over to the configured one.
+"""The adaptive formation policy (``formation.policy = "adaptive"``, docs/crowds.md
+"Formations"): beside the person, take the side the robot is on instead of crossing over to
+the configured one, and fall in behind where side by side does not fit.
 
-The side is chosen when the person is first seen and again whenever the person's heading has
-turned by more than :data:`REVERSAL` from the heading at the last choice (a turnaround): a
-robot that was on the person's left is on their right once they walk back, and switching the
-formation's side keeps it where it is instead of running round the person. A gradual turn
-(a circle) keeps the robot on its side, so it never switches there. Only the side bearings
-(left, right) switch; behind and front stay.
+- **Side.** Chosen when the person is first seen and again whenever the person's heading has
+  turned by more than :data:`REVERSAL` from the heading at the last choice (a turnaround): a
+  robot that was on the person's left is on their right once they walk back, and switching
+  the formation's side keeps it where it is instead of running round the person. A gradual
+  turn (a circle) keeps the robot on its side, so it never switches there.
+- **Narrow passage.** Where the room on that side of the person's way (the nearest obstacle
+  the robot knows within :data:`AHEAD` m ahead of the person, measured sideways from the
+  line of the person's heading) is less than the formation distance plus the robot's radius plus
+  :data:`MARGIN`, the robot falls in behind; it returns to the side once the room is
+  :data:`HYSTERESIS` more than that.
+- The bearing in force moves towards the chosen one at most :data:`BEARING_RATE`, so the slot
+  never jumps. Only formations beside the person adapt; behind and front stay.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
-from companion.geometry import wrap_pi
-from companion.params import LEFT, RIGHT
-from companion.types import PersonState, Pose
+from companion.geometry import wrap_2pi, wrap_pi
+from companion.params import BEHIND, LEFT, RIGHT, Params
+from companion.types import Circle, Obstacle, PersonState, Pose, Wall
 
 #: Heading change (rad) that counts as the person turning round.
 REVERSAL = 2.5
 #: Below this speed (m/s) the person's heading does not count.
 MOVING = 0.3
+#: How far ahead of the person (m) obstacles count for the room beside the way.
+AHEAD = 3.0
+#: Room (m) beyond the formation distance and the robot's radius that side by side needs, and
+#: the extra room before the robot returns to the side.
+MARGIN, HYSTERESIS = 0.3, 0.3
+#: Fastest change of the bearing in force (rad/s).
+BEARING_RATE = 1.0
 
 
 def side_of(robot: Pose, person: PersonState) -> float:
@@ -30,27 +45,75 @@ def side_of(robot: Pose, person: PersonState) -> float:
     return 1.0 if cross >= 0.0 else -1.0
 
 
+def side_room(person: PersonState, side: float, obstacles: Sequence[Obstacle],
+              ahead: float = AHEAD) -> float:
+    """Room (m) on ``side`` (+1 left, -1 right) of the person's way: the smallest sideways
+    distance from the line of the person's heading to an obstacle lying within ``ahead`` m
+    ahead of the person (0 where one crosses the line there); inf if none."""
+    c, s = math.cos(person.theta), math.sin(person.theta)
+
+    def frame(x: float, y: float) -> tuple[float, float]:    # (along, sideways on ``side``)
+        dx, dy = x - person.x, y - person.y
+        return dx * c + dy * s, side * (-dx * s + dy * c)
+
+    room = math.inf
+    for ob in obstacles:
+        if isinstance(ob, Circle):
+            along, lat = frame(ob.x, ob.y)
+            if -ob.radius <= along <= ahead + ob.radius:
+                room = min(room, max(lat - ob.radius, 0.0) if lat > -ob.radius else math.inf)
+        elif isinstance(ob, Wall):
+            (a0, l0), (a1, l1) = frame(ob.x0, ob.y0), frame(ob.x1, ob.y1)
+            lo, hi = max(min(a0, a1), 0.0), min(max(a0, a1), ahead)
+            if lo > hi:
+                continue
+            if abs(a1 - a0) < 1e-12:
+                lats = (l0, l1)
+            else:
+                lats = tuple(l0 + (l1 - l0) * (a - a0) / (a1 - a0) for a in (lo, hi))
+            if min(lats) <= 0.0 <= max(lats):
+                room = 0.0                   # it crosses the way
+            elif min(lats) > 0.0:
+                room = min(room, min(lats))
+    return room
+
+
 class FormationPolicy:
     """Chooses the bearing in force from the configured one (module docstring)."""
 
-    def __init__(self, bearing: float):
-        self.configured = bearing
+    def __init__(self, params: Params):
+        self.configured = params.formation.bearing
+        self.need = params.formation.distance + params.robot.radius + MARGIN
+        self.step = BEARING_RATE * params.dt
         self.reset()
 
     def reset(self) -> None:
         self.bearing = self.configured
+        self._side = self.configured
+        self._behind = False
         self._heading: float | None = None       # the person's heading at the last choice
 
-    def update(self, robot: Pose, person: PersonState) -> float:
+    def update(self, robot: Pose, person: PersonState,
+               obstacles: Sequence[Obstacle] = ()) -> float:
         """The bearing in force after this estimate of the person."""
         if not _beside(self.configured):
             return self.bearing
-        if self._heading is None:
+        turned = self._heading is not None and person.v > MOVING \
+            and abs(wrap_pi(person.theta - self._heading)) > REVERSAL
+        if self._heading is None or turned:
             self._heading = person.theta
-            self.bearing = LEFT if side_of(robot, person) > 0 else RIGHT
-        elif person.v > MOVING and abs(wrap_pi(person.theta - self._heading)) > REVERSAL:
-            self._heading = person.theta
-            self.bearing = LEFT if side_of(robot, person) > 0 else RIGHT
+            self._side = LEFT if side_of(robot, person) > 0 else RIGHT
+        room = side_room(person, 1.0 if self._side == LEFT else -1.0, obstacles)
+        if room < self.need:
+            self._behind = True
+        elif room > self.need + HYSTERESIS:
+            self._behind = False
+        target = BEHIND if self._behind else self._side
+        change = wrap_pi(target - self.bearing)
+        if abs(change) > math.pi / 2 + 1e-9:     # side to side: the slot stays where it is
+            self.bearing = target
+        else:
+            self.bearing = wrap_2pi(self.bearing + max(-self.step, min(self.step, change)))
         return self.bearing
 
 

@@ -60,7 +60,7 @@ class SafetySupervisor:
         self.params = params
         self._configured = params     # the parameters as given; ``params``: those in force
         self._rebuild = rebuild       # the inner controller for other parameters
-        self._formation = FormationPolicy(params.formation.bearing)
+        self._formation = FormationPolicy(params)
         self._clock = checks.Clock(params.dt, params.supervisor.max_step_ratio)
         self._odometry = checks.Odometry(params.robot)
         self._tracker = PersonTracker(params.tracker, params.sensing)
@@ -118,16 +118,16 @@ class SafetySupervisor:
                 lost = True           # the other checks first; then stop or search below
             else:
                 stop = "person_lost"
+        obstacles = tuple(ob for ob in obs.obstacles if checks.obstacle_is_finite(ob))
+        if len(obstacles) < len(obs.obstacles):
+            reasons.append("obstacle_invalid")
         if estimate is not None:
             self._last = estimate
             self._search.reset()
             if not stop and p.formation.policy == "adaptive" and self._rebuild is not None:
-                bearing = self._formation.update(obs.robot, estimate.walker)
+                bearing = self._formation.update(obs.robot, estimate.walker, obstacles)
                 if bearing != p.formation.bearing:
                     p = self._switch(bearing)
-        obstacles = tuple(ob for ob in obs.obstacles if checks.obstacle_is_finite(ob))
-        if len(obstacles) < len(obs.obstacles):
-            reasons.append("obstacle_invalid")
         if not stop and checks.obstacle_inside(obs.robot, obstacles, p.robot.radius):
             stop = "obstacle_in_footprint"
         scan = None if obs.scan is None else checked_scan(obs.scan, p.lidar.range_max)
@@ -202,7 +202,7 @@ class SafetySupervisor:
         limits carry the robot from its last command towards the new slot; ``inner`` starts
         fresh at the next step. Parameters of the clock and tracker must not change."""
         self.inner, self.params, self._configured = inner, params, params
-        self._formation = FormationPolicy(params.formation.bearing)
+        self._formation = FormationPolicy(params)
         self._search.params = params
         self._odometry.robot = params.robot
         self._inner_fresh = True

@@ -76,7 +76,8 @@ class Formation(Validated):
     policy: str = param("fixed", "-", "'fixed': the bearing as given (the paper's); "
                         "'adaptive': beside the person (left or right), the robot takes the "
                         "side it is on when it first sees the person and when the person "
-                        "turns round, instead of crossing over (companion.control.formation)",
+                        "turns round, instead of crossing over, and falls in behind where "
+                        "side by side does not fit (companion.control.formation)",
                         choices=("fixed", "adaptive"))
 
 
