@@ -1,5 +1,6 @@
 """The built-in crowd scenes (docs/crowds.md): where the companion person walks, the walls,
-and how the other walkers are drawn for an episode's seed.
+and how the other walkers are drawn for an episode's seed; and a scenario's ``[crowd]``
+table (:func:`crowd_from`).
 
 In every scene the person starts at the origin walking along +x at about 1.1 m/s; the
 walkers are drawn from the episode's ``walkers`` random stream, so each seed is another crowd.
@@ -8,13 +9,16 @@ walkers are drawn from the episode's ``walkers`` random stream, so each seed is 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import partial
+from typing import Any
 
 import numpy as np
 
-from companion.sim.crowd import Walker
+from companion.config import reject_unknown
+from companion.errors import ConfigError
+from companion.sim.crowd import Crowd, Walker
 from companion.types import Wall
 
 PERSON_SPEED = 1.1      # m/s
@@ -126,3 +130,23 @@ SCENES = {s.name: s for s in (
           "in both directions", Walker(((0.0, 0.0), (15.0, 0.0), (-15.0, 0.0)),
                                        PERSON_SPEED), (), Spaced(partial(_lane, 4.0, -10.0, 25.0))),
 )}
+
+
+CROWD_KEYS = ("scene", "walkers")
+
+
+def crowd_from(data: Any, dt: float, where: str) -> Crowd:
+    """The ``[crowd]`` table: a built-in crowd scene and how many walkers besides the person
+    (docs/crowds.md)."""
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"{where}crowd: expected a table with scene and walkers")
+    reject_unknown(data, CROWD_KEYS, f"{where}crowd.")
+    scene = data.get("scene")
+    if scene not in SCENES:
+        raise ConfigError(f"{where}crowd.scene: expected one of {', '.join(SCENES)}, got "
+                          f"{scene!r}")
+    walkers = data.get("walkers", 10)
+    if isinstance(walkers, bool) or not isinstance(walkers, int) or not 0 <= walkers <= 60:
+        raise ConfigError(f"{where}crowd.walkers: expected an integer in [0, 60], got "
+                          f"{walkers!r}")
+    return Crowd(SCENES[scene], walkers, dt=dt)

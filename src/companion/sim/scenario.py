@@ -68,7 +68,7 @@ from companion.errors import ConfigError
 from companion.model import relative_state
 from companion.params import LEFT, RIGHT, Params, params_from_mapping, sensing_params
 from companion.sim.crowd import Crowd
-from companion.sim.crowd_scenes import SCENES
+from companion.sim.crowd_scenes import crowd_from
 from companion.sim.faults import Fault, faults_from_list
 from companion.sim.person import Figure8, PersonMotion, Segment, SegmentPath, circle, line, u_shape
 from companion.sim.recorded import load_person_csv
@@ -274,26 +274,6 @@ class Scenario:
 
 TOP_KEYS = ("name", "description", "duration", "seed", "controller", "obstacle_source",
             "sensing", "person", "crowd", "robot", "obstacles", "params", "faults")
-CROWD_KEYS = ("scene", "walkers")
-
-
-def crowd_from(data: Any, dt: float, where: str) -> Crowd:
-    """The ``[crowd]`` table: a built-in crowd scene and how many walkers besides the person
-    (docs/crowds.md)."""
-    if not isinstance(data, Mapping):
-        raise ConfigError(f"{where}crowd: expected a table with scene and walkers")
-    reject_unknown(data, CROWD_KEYS, f"{where}crowd.")
-    scene = data.get("scene")
-    if scene not in SCENES:
-        raise ConfigError(f"{where}crowd.scene: expected one of {', '.join(SCENES)}, got "
-                          f"{scene!r}")
-    walkers = data.get("walkers", 10)
-    if isinstance(walkers, bool) or not isinstance(walkers, int) or not 0 <= walkers <= 60:
-        raise ConfigError(f"{where}crowd.walkers: expected an integer in [0, 60], got "
-                          f"{walkers!r}")
-    return Crowd(SCENES[scene], walkers, dt=dt)
-
-
 def _resolve_auto_side(params_map: dict, start: Pose | None, person: PersonMotion,
                        where: str) -> dict:
     formation = params_map.get("formation")
