@@ -274,3 +274,11 @@ scenarios = [{name = "fig7", obstacles = "lidar", label = "eight"}]
     assert plain.params.sensing.person_latency_s == REALISTIC.person_latency_s
     assert plain.obstacle_source == "lidar"
     assert plain.params.formation.bearing == load_scenario("fig7").params.formation.bearing
+
+
+def test_an_unknown_suite_name_lists_the_shipped_ones(tmp_path):
+    with pytest.raises(ConfigError, match=r"^pedestrian: no such suite file or shipped suite "
+                                          r"\(shipped: .*pedestrians"):
+        load_suite("pedestrian")
+    with pytest.raises(ConfigError, match="no such file"):
+        load_suite(tmp_path / "missing.toml")

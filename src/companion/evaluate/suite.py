@@ -89,7 +89,11 @@ def suite_path(name: str | Path) -> Path:
     """A suite file, or a shipped suite by name (``pedestrians``)."""
     if str(name) in builtin_suites():
         return BUILTIN / f"{name}.toml"
-    return Path(name)
+    path = Path(name)
+    if not path.exists() and path.suffix != ".toml" and len(path.parts) == 1:
+        raise ConfigError(f"{name}: no such suite file or shipped suite (shipped: "
+                          f"{', '.join(builtin_suites())})")
+    return path
 
 
 def load_suite(name: str | Path) -> Suite:
