@@ -252,9 +252,15 @@ class Social:
             self._jerk_sq += float(np.sum(jerk * jerk))
             self._jerks += len(jerk)
         self._prev = rows[:, -2:]
-        for standing in np.abs(log["robot_v"]) < STANDING_MPS:
-            self._stop = self._stop + 1 if standing else 0
-            self._longest = max(self._longest, self._stop)
+        moving = np.flatnonzero(np.abs(log["robot_v"]) >= STANDING_MPS)
+        if len(moving) == 0:                     # standing through the block
+            self._stop += len(log["robot_v"])
+        else:                                    # the runs of standing samples in it
+            runs = np.diff(np.concatenate(([-1], moving))) - 1
+            runs[0] += self._stop                 # carried over from the blocks before
+            self._longest = max(self._longest, int(runs.max()))
+            self._stop = len(log["robot_v"]) - 1 - int(moving[-1])
+        self._longest = max(self._longest, self._stop)
 
     def value(self) -> dict:
         dt = self._dt

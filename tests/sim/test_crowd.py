@@ -10,8 +10,8 @@ import pytest
 from companion import metrics
 from companion.errors import ConfigError
 from companion.params import Params
-from companion.sim.crowd import WALKER_RADIUS, Crowd, Walker
-from companion.sim.crowd_scenes import SCENES, Scene
+from companion.sim.crowd import WALKER_RADIUS, Crowd, Scene, Walker
+from companion.sim.crowd_scenes import SCENES
 from companion.sim.episode import Simulator, _WalkerContacts
 from companion.sim.runner import run_one
 from companion.sim.scenario import load_scenario, scenario_from_mapping
@@ -129,10 +129,16 @@ def test_social_measures_of_a_straight_steady_walk():
     assert (m["walker_contacts_robot"], m["walker_contacts_walker"]) == (1, 1)
     assert m["min_walker_gap_m"] is None and m["walker_intimate_s"] == 0.0
     assert m["longest_stop_s"] == 0.0
-    cols["robot_v"][50:90] = 0.0                           # a 2 s stop
-    social = metrics.Social()
-    social.add(Log({**cols, "status": log["status"], "reason": log["reason"]}))
-    assert social.value()["longest_stop_s"] == pytest.approx(40 * dt)
+    cols["robot_v"][50:90] = 0.0                           # a 2 s stop across blocks
+    cols["robot_v"][150:160] = 0.0
+    stopped = Log({**cols, "status": log["status"], "reason": log["reason"]})
+    for sizes in ([n], [37] * 6, [1] * n):
+        social = metrics.Social()
+        start = 0
+        for size in sizes:
+            social.add(Log({k: v[start:start + size] for k, v in stopped.columns.items()}))
+            start += size
+        assert social.value()["longest_stop_s"] == pytest.approx(40 * dt)
 
 
 def test_a_crowd_episode_is_the_same_in_a_worker_process():

@@ -17,7 +17,7 @@ from companion import metrics
 from companion.apps import animate, plots, table3
 from companion.control import CONTROLLERS
 from companion.evaluate.rows import row_and_log
-from companion.evaluate.run import run_episodes
+from companion.evaluate.run import run_episodes, suite_rows
 from companion.evaluate.suite import Suite, load_suite
 from companion.io import save_figure, write_csv, write_text
 from companion.sim import convergence
@@ -150,11 +150,11 @@ def reproduce(out: Path, workers: int | None = None, progress: Progress | None =
         fig3_rows.append(convergence.csv_row(case, _metrics(row)))
     fig4_runs = {ctl: log for ctl, (_, log) in zip(names, results[len(fig3):])}
     fig7_log = results[-1][1]
-    rows2 = [{**e.factors, **r} for e, r in zip(tables, plain)]
+    done = {e.key: r for e, r in zip(tables, plain)}
     trajectory = {v: k for k, v in TRAJECTORIES.items()}
     rows = [Table2Row(trajectory[r["motion"]], r["controller"], r)
-            for r in rows2[:len(runs["table2"].episodes)]]
-    table3_rows = table3.rows(rows2[len(runs["table2"].episodes):])
+            for r in suite_rows(runs["table2"], done)]
+    table3_rows = table3.rows(suite_rows(runs["table3"], done))
     write_csv(out / "fig3.csv", convergence.CSV_COLUMNS, fig3_rows)
     for speed, speed_runs in fig3_runs.items():
         _save(plots.convergence(speed_runs, f"Fig. 3: person at {speed:g} m/s (lqr)"),

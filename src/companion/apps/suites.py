@@ -43,9 +43,9 @@ def sensing_entry(args: argparse.Namespace, default: str) -> str | dict:
     if args.sensing:
         return str(Path(args.sensing).resolve()) if args.sensing.endswith(".toml") \
             else args.sensing
-    if args.params and "sensing" in load_toml(args.params):
-        return {"label": Path(args.params).stem, "base": "realistic",
-                **load_toml(args.params)["sensing"]}
+    sensing = load_toml(args.params).get("sensing") if args.params else None
+    if sensing is not None:
+        return {"label": Path(args.params).stem, "base": "realistic", **sensing}
     return default
 
 
@@ -120,7 +120,7 @@ def cmd_convergence(args: argparse.Namespace) -> int:
         logs = [log for _, log in results]
 
         def figures(folder: Path) -> None:
-            runs: dict[float, list] = {}
+            runs: dict[str, list] = {}       # by group: one figure per person speed
             for e, log in zip(suite.episodes, logs):
                 start = e.spec.start
                 runs.setdefault(e.group, []).append((f"({start.x:g}, {start.y:g})", e.side, log))

@@ -16,14 +16,14 @@ seed.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import pyrvo
 
 from companion.geometry import wrap_pi
-from companion.types import Circle, PersonState
+from companion.types import Circle, PersonState, Wall
 
 #: Body radius of a walker (m): the circle the LiDAR sees and contacts are measured against.
 WALKER_RADIUS = 0.25
@@ -37,6 +37,18 @@ class Walker:
     route: tuple[tuple[float, float], ...]
     speed: float = 1.2
     loop: bool = False
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A crowd scene: the companion person's route, the walls, and ``draw(rng, n)``: the
+    ``n`` other walkers of one episode."""
+
+    name: str
+    description: str
+    person: Walker
+    walls: tuple[Wall, ...]
+    draw: Callable[[np.random.Generator, int], tuple[Walker, ...]]
 
 
 @dataclass(frozen=True)
@@ -61,7 +73,7 @@ class Crowd:
     Before :meth:`reset` there are no walkers and the person stands at its start, facing its
     first waypoint. The episode works on its own copy (:meth:`fresh`)."""
 
-    def __init__(self, scene: Any, walkers: int, params: CrowdParams = CrowdParams(),
+    def __init__(self, scene: Scene, walkers: int, params: CrowdParams = CrowdParams(),
                  dt: float = 0.05):
         self.scene, self.count, self.params, self.dt = scene, walkers, params, dt
         self.person, self.walls = scene.person, tuple(scene.walls)

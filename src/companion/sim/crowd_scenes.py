@@ -18,23 +18,11 @@ import numpy as np
 
 from companion.config import reject_unknown
 from companion.errors import ConfigError
-from companion.sim.crowd import Crowd, Walker
+from companion.sim.crowd import Crowd, Scene, Walker
 from companion.types import Wall
 
 PERSON_SPEED = 1.1      # m/s
 LENGTH = 30.0           # m the person walks along +x
-
-
-@dataclass(frozen=True)
-class Scene:
-    """A crowd scene: the companion person's route, the walls, and ``draw(rng, n)``: the
-    ``n`` other walkers of one episode."""
-
-    name: str
-    description: str
-    person: Walker
-    walls: tuple[Wall, ...]
-    draw: Callable[[np.random.Generator, int], tuple[Walker, ...]]
 
 
 #: Closest start between two walkers, and from a walker to the person's and robot's starts (m).
