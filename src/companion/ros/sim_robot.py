@@ -36,6 +36,8 @@ from companion.types import Command, Log, Observation, PersonEstimate
 #: /clock and a bag's log times of a simulated run count from it (a bag of a simulated run
 #: starts on that day, not at 0, which tools show as 1970).
 SIM_EPOCH_NS = 946_684_800 * 1_000_000_000
+#: Wall time (s) a robot that waited for the node waits on after its first command.
+SETTLE_S = 0.5
 
 
 class Interrupted(Exception):
@@ -118,13 +120,18 @@ class WireRobot:
 
     def wait_for_node(self, timeout: float) -> bool:
         """Wait up to ``timeout`` s for a first /cmd_vel (with ``use_sim_time``, /clock stays
-        at the start meanwhile, so the node can tick); True if one came."""
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
+        at the start meanwhile, so the node can tick), then :data:`SETTLE_S` more: a first
+        command shows the routes of /clock and /cmd_vel, not yet those of the node's other
+        subscriptions (on Zenoh they were measured to come up later, and the first sample's
+        odometry and detection were lost). True if a command came."""
+        end, settled = time.monotonic() + timeout, None
+        while time.monotonic() < end or settled is not None:
             if self._clock is not None and self.time is not None:
                 self._clock(convert.clock_msg(-self.params.dt, self.time))
             with self._lock:
-                if self.commands:
+                if self.commands and settled is None:
+                    settled = time.monotonic() + SETTLE_S
+                if settled is not None and time.monotonic() >= settled:
                     self._received, self.commands = None, 0
                     return True
             if self.pacer.stop.wait(0.05):
