@@ -5,6 +5,7 @@ import json
 
 import pytest
 
+from companion.evaluate import fuzz_runs
 from companion.sim import fuzz
 from test_cli import run  # the CLI in-process: exit code, stdout, stderr
 
@@ -20,7 +21,6 @@ def test_fuzz_writes_one_row_per_episode_and_a_replay_gives_the_same_counts(tmp_
     assert {r["sensing"] for r in rows} == {"ideal"}
     assert int(rows[0]["seed"]) == 2 * fuzz.SEED_STRIDE
     failed = [r for r in rows if r["failed"] == "1"]
-    assert code == (1 if failed else 0)
     assert len(report["failed"]) == len(failed)
     assert set(report["by_pair"]) == {"lqr/ideal", "pid/ideal"}
     assert "lqr/ideal" in out and "all" in out
@@ -28,12 +28,14 @@ def test_fuzz_writes_one_row_per_episode_and_a_replay_gives_the_same_counts(tmp_
     robot = sum(fuzz.robot_failed({k: int(r[k]) for k in fuzz.COUNTS if not k.startswith("min_")})
                 for r in rows)
     assert (rate["episodes"], rate["robot_failed_episodes"]) == (len(rows), robot)
+    assert code == (1 if robot else 0) and report["walker"] == "blind"   # ideal: none
     assert rate["ci95"][0] <= rate["rate"] <= rate["ci95"][1]
     assert f"ideal: the robot failed by its own doing in {robot} of {len(rows)} episodes" in out
     row = rows[0]
     code, out, _ = run(["fuzz", "--replay", row["seed"], "--controllers", "lqr", "--sensing",
                         "ideal", "--out", str(tmp_path)], capsys)
-    assert code == int(row["failed"])
+    assert code == fuzz.robot_failed({k: int(float(row[k])) for k in fuzz.COUNTS
+                                      if not k.startswith("min_")})
     episode = json.loads((tmp_path / "episode.json").read_text())
     for key in fuzz.COUNTS:
         assert float(row[key]) == pytest.approx(episode["counts"][key], rel=1e-9)
@@ -141,3 +143,13 @@ def test_a_bad_sensing_file_for_fuzz_names_the_file_and_key(tmp_path, capsys):
     assert f"--sensing: {bad}: actuator_tau_s: expected a finite number >= 0" in err
     assert err.count("\n") == 1
     assert not (tmp_path / "o").exists()
+
+
+def test_fuzz_exits_on_its_criteria_only():
+    rate = {"episodes": 400, "robot_failed_episodes": 0, "rate": 0.0, "ci95": [0.0, 0.0092]}
+    assert fuzz_runs.missed_criteria({"ideal": rate, "realistic": rate}) == []
+    one = dict(rate, robot_failed_episodes=1, ci95=[0.0001, 0.0139])
+    missed = fuzz_runs.missed_criteria({"ideal": one, "realistic": one})
+    assert missed[0].startswith("ideal: the robot failed by its own doing in 1 of 400")
+    assert missed[1].startswith("realistic: the robot-caused failure rate's 95 % upper bound "
+                                "is 1.4% over 400 episodes")

@@ -194,8 +194,8 @@ def test_inconsistent_detections_do_not_reacquire():
     tr = PersonTracker(TP)
     walk(tr, np.arange(0.0, 1.05, 0.1), straight)
     assert tr.estimate(2.0) is None
-    for k, t in enumerate(np.arange(2.0, 4.0, 0.1)):
-        tr.add([seen(t, 5.0 * (k % 2), 0.0)], t)      # two places 5 m apart, alternating
+    for k, t in enumerate(np.arange(2.0, 4.0, 0.1)):    # two places 3 m apart, alternating,
+        tr.add([seen(t, 1.2 * t, 0.5 + 3.0 * (k % 2 - 0.5))], t)   # both where it may be
     assert tr.lost and not tr.reacquired
 
 
@@ -341,3 +341,65 @@ def test_detections_without_covariance_take_the_declared_sensing_noise():
                          ).params.heading_std_rad == 0.02
     _, nis = _noisy_walk(TP, 0.10, None, SensingParams(person_position_noise_m=0.10))
     assert 1.4 < nis.mean() < 2.4
+
+
+def lose_at_four(tr):
+    """A walk along y = 0.5 at 1.2 m/s, seen until t = 4.0, then lost."""
+    walk(tr, np.arange(0.0, 4.05, 0.1), straight)
+    assert tr.estimate(4.0 + TP.lost_after_s + 0.01) is None and tr.lost
+
+
+def test_a_person_is_refound_only_where_the_lost_track_could_have_gone():
+    far = PersonTracker(TP)
+    lose_at_four(far)
+    for t in np.arange(5.0, 6.0, 0.1):                 # someone 6 m to the side, steadily
+        far.add([seen(t, 1.2 * t, 6.5)], t)
+    assert far.lost and far.estimate(5.9) is None
+    near = PersonTracker(TP)
+    lose_at_four(near)
+    for t in np.arange(5.0, 6.0, 0.1):                 # the person, where they were going
+        near.add([seen(t, 1.2 * t, 0.5)], t)
+    assert not near.lost and near.estimate(5.9).state.x == pytest.approx(1.2 * 5.9, abs=0.05)
+
+
+def test_the_reidentification_hook_decides_where_it_says_so():
+    asked = []
+
+    def hook(d, last):
+        asked.append((d.t, last.x))
+        return d.y > 5.0 if d.y != 0.5 else None      # the one 6 m away is the person
+
+    tr = PersonTracker(TP, reidentify=hook)
+    lose_at_four(tr)
+    for t in np.arange(5.0, 5.6, 0.1):
+        tr.add([seen(t, 1.2 * t, 6.5)], t)
+    assert not tr.lost and tr.estimate(5.5).state.y == pytest.approx(6.5, abs=0.05)
+    assert asked and asked[0][1] == pytest.approx(1.2 * 4.0, abs=0.05)   # the last track
+
+    refuses = PersonTracker(TP, reidentify=lambda d, last: False)
+    lose_at_four(refuses)
+    for t in np.arange(5.0, 6.0, 0.1):                 # consistent with the prediction, but no
+        refuses.add([seen(t, 1.2 * t, 0.5)], t)
+    assert refuses.lost
+
+
+def test_a_failing_hook_is_reported_and_the_prediction_decides():
+    def broken(d, last):
+        raise RuntimeError("camera gone")
+
+    tr = PersonTracker(TP, reidentify=broken)
+    lose_at_four(tr)
+    reasons = []
+    for t in np.arange(5.0, 5.6, 0.1):
+        tr.add([seen(t, 1.2 * t, 0.5)], t, reasons=reasons)
+    assert "reidentify_failed" in reasons and not tr.lost
+
+
+def test_detections_of_other_people_are_handed_on():
+    tr = PersonTracker(TP)
+    walk(tr, np.arange(0.0, 2.0, 0.1), straight)
+    other = seen(2.0, 4.0, 3.0)
+    tr.add([seen(2.0, 2.4, 0.5), other], 2.0)
+    assert tr.others == [other]
+    tr.add([seen(2.1, 2.52, 0.5)], 2.1)
+    assert tr.others == []

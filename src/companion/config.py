@@ -280,6 +280,8 @@ def range_text(f: dataclasses.Field) -> str:
         return "one of " + ", ".join(f"'{c}'" for c in choices)
     if check is not None:
         return check.range
+    if f.type in (bool, "bool"):
+        return "true or false"
     return "a name" if f.type in (str, "str") else "[-1e6, 1e6]"
 
 

@@ -140,9 +140,55 @@ def clearance(obstacle: Obstacle, px: float, py: float, footprint: float = 0.0) 
     return wall_clearance(px, py, o.x0, o.y0, o.x1, o.y1) - footprint
 
 
+def line_of_sight(ax: float, ay: float, bx: float, by: float,
+                  obstacles: Sequence[Obstacle]) -> bool:
+    """True if the segment from ``(ax, ay)`` to ``(bx, by)`` passes through no circle and
+    crosses no wall (touching counts as clear)."""
+    for o in obstacles:
+        if isinstance(o, Circle):
+            px, py = segment_point(o.x, o.y, ax, ay, bx, by)
+            if math.hypot(px - o.x, py - o.y) < o.radius:
+                return False
+        elif _crosses(ax, ay, bx, by, o.x0, o.y0, o.x1, o.y1):
+            return False
+    return True
+
+
+def _crosses(ax: float, ay: float, bx: float, by: float, cx: float, cy: float, dx: float,
+             dy: float) -> bool:
+    """Whether segments ab and cd cross properly (each one's ends on both sides of the
+    other's line)."""
+    def side(px, py, qx, qy, rx, ry):
+        return (qx - px) * (ry - py) - (qy - py) * (rx - px)
+    return (side(ax, ay, bx, by, cx, cy) * side(ax, ay, bx, by, dx, dy) < 0.0
+            and side(cx, cy, dx, dy, ax, ay) * side(cx, cy, dx, dy, bx, by) < 0.0)
+
+
+def closest_approach_time(dx: float, dy: float, dvx: float, dvy: float, horizon: float
+                          ) -> float:
+    """The time in ``[0, horizon]`` (s) at which two points moving at constant velocities are
+    closest: ``(dx, dy)`` is the one's position relative to the other, ``(dvx, dvy)`` its
+    relative velocity."""
+    speed2 = dvx * dvx + dvy * dvy
+    if speed2 <= 1e-12:
+        return 0.0
+    return min(max(-(dx * dvx + dy * dvy) / speed2, 0.0), horizon)
+
+
+def predicted(obstacles: Sequence[Obstacle], x: float, y: float, vx: float, vy: float,
+              horizon: float) -> tuple[Obstacle, ...]:
+    """The obstacles with every moving circle where it will be when closest to a point at
+    ``(x, y)`` moving at ``(vx, vy)`` (the robot), within ``horizon`` s: what avoidance steers
+    around. Standing obstacles and walls are as they are."""
+    if horizon <= 0.0:
+        return tuple(obstacles)
+    return tuple(o.at(closest_approach_time(o.x - x, o.y - y, o.vx - vx, o.vy - vy, horizon))
+                 if isinstance(o, Circle) and o.moving else o for o in obstacles)
+
+
 class ObstacleArrays(NamedTuple):
-    """Obstacles as arrays for compiled kernels: circles as rows (x, y, r), walls as rows
-    (x0, y0, x1, y1)."""
+    """Obstacles as arrays for compiled kernels: circles as rows (x, y, r, vx, vy), walls as
+    rows (x0, y0, x1, y1)."""
 
     circles: np.ndarray
     walls: np.ndarray
@@ -150,19 +196,22 @@ class ObstacleArrays(NamedTuple):
 
 def obstacle_arrays(obstacles: Sequence[Obstacle]) -> ObstacleArrays:
     """The obstacles as :class:`ObstacleArrays`."""
-    circles = [(o.x, o.y, o.radius) for o in obstacles if isinstance(o, Circle)]
+    circles = [(o.x, o.y, o.radius, o.vx, o.vy) for o in obstacles if isinstance(o, Circle)]
     walls = [(o.x0, o.y0, o.x1, o.y1) for o in obstacles if not isinstance(o, Circle)]
-    return ObstacleArrays(np.array(circles, dtype=float).reshape(-1, 3),
+    return ObstacleArrays(np.array(circles, dtype=float).reshape(-1, 5),
                           np.array(walls, dtype=float).reshape(-1, 4))
 
 
 @jitable
-def min_clearance(px: float, py: float, obstacles: ObstacleArrays, footprint: float) -> float:
-    """Smallest :func:`clearance` from a footprint at (px, py) to the obstacles (inf if none)."""
+def min_clearance(px: float, py: float, obstacles: ObstacleArrays, footprint: float,
+                  t: float = 0.0) -> float:
+    """Smallest :func:`clearance` from a footprint at (px, py) to the obstacles (inf if none),
+    the circles where their velocities take them in ``t`` s."""
     out = math.inf
     c, w = obstacles.circles, obstacles.walls
     for i in range(c.shape[0]):
-        out = min(out, circle_clearance(px, py, c[i, 0], c[i, 1], c[i, 2]))
+        out = min(out, circle_clearance(px, py, c[i, 0] + t * c[i, 3], c[i, 1] + t * c[i, 4],
+                                        c[i, 2]))
     for j in range(w.shape[0]):
         out = min(out, wall_clearance(px, py, w[j, 0], w[j, 1], w[j, 2], w[j, 3]))
     return out - footprint

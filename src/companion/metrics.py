@@ -211,13 +211,20 @@ class Split:
 INTIMATE_M, PERSONAL_M = 0.45, 1.2
 #: Below this speed (m/s) the robot is standing (for the longest stop).
 STANDING_MPS = 0.05
+#: Time (s) in the detector's view while lost that counts as a chance to re-find the person
+#: (the tracker needs ``tracker.reacquire_time_s``, 0.3 s, of consistent detections).
+REFIND_VIEW_S = 0.5
 
 
 class Social:
     """The social-navigation measures (docs/crowds.md) over consecutive blocks: contacts with
     other walkers by who moved into whom, the closest gap to a walker and the time inside a
     walker's intimate zone, the time the gap to the person lies in the intimate and in the
-    personal zone, the robot's path length, the RMS of its jerk and its longest stop."""
+    personal zone, the robot's path length, the RMS of its jerk and its longest stop; and
+    of finding the person: the share of samples with the person in the detector's view, the
+    times the person was lost and re-found (the tracker's decisions, from the status reasons),
+    the losses during which the person was in view for at least :data:`REFIND_VIEW_S` (the
+    chances to re-find them) and the time spent searching."""
 
     def __init__(self) -> None:
         self._contacts = {1.0: 0, 2.0: 0}
@@ -227,6 +234,11 @@ class Social:
         self._prev: np.ndarray | None = None     # the last two rows' t, x, y, v
         self._stop, self._longest = 0, 0          # samples standing: now, longest
         self._dt = 0.0                            # the sample period, once two samples came
+        self._samples = self._in_view = self._searching = 0
+        self._losses = self._refinds = self._chances = 0
+        self._was_lost = False                    # the last sample of the blocks before
+        self._lost_seen = 0                       # samples in view during that loss so far
+        self._chance_counted = False              # and whether it counted as a chance
 
     def add(self, log: Log) -> None:
         code, gap = log["walker_contact"], log["walker_gap_m"]
@@ -261,6 +273,39 @@ class Social:
             self._longest = max(self._longest, int(runs.max()))
             self._stop = len(log["robot_v"]) - 1 - int(moving[-1])
         self._longest = max(self._longest, self._stop)
+        self._finding(log)
+
+    def _finding(self, log: Log) -> None:
+        if "reason" not in log.columns or "person_in_view" not in log.columns:
+            return                                # a hand-made log without them
+        reason = np.asarray(log["reason"], dtype=str)
+        lost = (np.char.find(reason, "person_lost") >= 0) \
+            | (np.char.find(reason, "reacquiring") >= 0)
+        before = np.concatenate(([self._was_lost], lost[:-1]))
+        start = lost & ~before
+        self._losses += int(np.count_nonzero(start))
+        self._refinds += int(np.count_nonzero(~lost & before))
+        # a chance to re-find: a loss during which the person was in view for REFIND_VIEW_S
+        run = np.cumsum(start)                     # 0: the loss carried from before
+        seen = np.bincount(run[lost & (log["person_in_view"] > 0.5)],
+                           minlength=int(run[-1]) + 1 if len(run) else 1)
+        seen[0] += self._lost_seen if self._was_lost else 0
+        need = REFIND_VIEW_S / self._dt if self._dt else math.inf
+        chance = seen >= need - 1e-9
+        if self._was_lost and self._chance_counted:
+            chance[0] = False                      # counted in an earlier block
+        elif not self._was_lost:
+            chance[0] = False                      # no loss carried over
+        self._chances += int(np.count_nonzero(chance))
+        if len(lost):
+            self._was_lost = bool(lost[-1])
+            last = int(run[-1])
+            self._lost_seen = int(seen[last]) if self._was_lost else 0
+            self._chance_counted = self._was_lost and bool(
+                seen[last] >= need - 1e-9)
+        self._searching += int(np.count_nonzero(np.char.find(reason, "search_") >= 0))
+        self._in_view += int(np.count_nonzero(log["person_in_view"] > 0.5))
+        self._samples += len(reason)
 
     def value(self) -> dict:
         dt = self._dt
@@ -273,7 +318,13 @@ class Social:
                 "path_length_m": self._length,
                 "jerk_rms_mps3": math.sqrt(self._jerk_sq / self._jerks) if self._jerks
                 else 0.0,
-                "longest_stop_s": self._longest * dt}
+                "longest_stop_s": self._longest * dt,
+                "person_in_view_share": self._in_view / self._samples if self._samples
+                else None,
+                "person_losses": self._losses,
+                "person_refinds": self._refinds,
+                "person_refind_chances": self._chances,
+                "search_time_s": self._searching * dt}
 
 
 class Running:

@@ -87,12 +87,25 @@ class PersonEstimate:
 
 @dataclass(frozen=True)
 class Circle:
-    """A circular obstacle; ``influence`` (m) overrides the avoidance range r / K_ob if set."""
+    """A circular obstacle; ``influence`` (m) overrides the avoidance range r / K_ob if set.
+    ``vx``, ``vy`` (m/s, world frame): its velocity, for a walker or a moving LiDAR cluster
+    (0: standing or unknown); the keep-out and avoidance predict it at constant velocity."""
 
     x: float
     y: float
     radius: float
     influence: float | None = None
+    vx: float = 0.0
+    vy: float = 0.0
+
+    @property
+    def moving(self) -> bool:
+        return self.vx != 0.0 or self.vy != 0.0
+
+    def at(self, dt: float) -> Circle:
+        """Where it is ``dt`` s on at its velocity."""
+        return Circle(self.x + self.vx * dt, self.y + self.vy * dt, self.radius, self.influence,
+                      self.vx, self.vy)
 
 
 @dataclass(frozen=True)
@@ -183,7 +196,7 @@ LOG_COLUMNS = ("t", "robot_x", "robot_y", "robot_theta", "person_x", "person_y",
                "robot_v", "robot_omega", "person_est_x", "person_est_y", "person_est_theta",
                "person_est_v", "person_est_omega", "person_est_std", "slot_error_m",
                "estimate_error_m", "tracking_error_m", "safety_shift_m", "person_gap_m",
-               "walker_gap_m", "walker_contact")
+               "walker_gap_m", "walker_contact", "person_in_view")
 """Numeric columns of an episode log: the true state of robot and person, the relative state,
 ``beta_ref`` (heading offset that holding the slot needs), the command (``v``, ``omega``),
 ``u_ob`` (the avoidance part of omega, rad/s), ``rho_ob`` (clearance from the robot's
@@ -194,7 +207,10 @@ error comes from (docs/sensing.md): ``slot_error_m`` from the robot's reference 
 true person's slot, ``estimate_error_m`` from the slot the estimate implies to the true one,
 ``tracking_error_m`` from R to the estimated slot (both NaN without an estimate), and
 ``safety_shift_m``, how far the keep-out moved R in this step (the executed command's motion
-of R over one period against the controller's request; 0 without a request)."""
+of R over one period against the controller's request; 0 without a request); the crowd
+columns (docs/crowds.md): ``person_gap_m``, ``walker_gap_m``, ``walker_contact`` and
+``person_in_view`` (1 where the person detector could see the person, 0 out of its range or
+hidden)."""
 
 TEXT_COLUMNS = ("status", "reason")
 """The safety supervisor's status and reason per sample ("ok" and "" without one)."""
@@ -203,7 +219,9 @@ TEXT_COLUMNS = ("status", "reason")
 @dataclass(frozen=True, eq=False)
 class Log:
     """Columns of one episode: :data:`LOG_COLUMNS` as float arrays and :data:`TEXT_COLUMNS`
-    as string arrays, all of length N (row k: state at t_k and the command applied from t_k)."""
+    as string arrays, all of length N (row k: state at t_k and the command applied from t_k);
+    a crowd episode also has ``walkers_xy``, N rows of the walkers' positions (x0, y0, x1,
+    ...; in memory only, not in log.csv)."""
 
     columns: dict[str, np.ndarray]
 

@@ -8,16 +8,18 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from companion.control.keepout import (
+from companion.control.evasive import (
     Rollout,
     _rollout_margins,
+    evasive_target,
+    rollout_margins,
+    speed_up_distance,
+)
+from companion.control.keepout import (
     barrier_speed,
     braking_bound,
     braking_speed,
-    evasive_target,
     heading_std,
-    rollout_margins,
-    speed_up_distance,
 )
 from companion.control.limits import limit
 from companion.geometry import clearance, lagged, obstacle_arrays, unicycle_step

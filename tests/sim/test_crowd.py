@@ -1,6 +1,7 @@
 """Crowd scenes: ORCA walkers (pyrvo) who avoid each other, the person and the robot;
 deterministic for a seed; contacts counted by who moved into whom; the social measures."""
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -9,13 +10,15 @@ import pytest
 
 from companion import metrics
 from companion.errors import ConfigError
-from companion.params import Params
+from companion.geometry import line_of_sight
+from companion.params import REALISTIC, Params
 from companion.sim.crowd import WALKER_RADIUS, Crowd, Scene, Walker
 from companion.sim.crowd_scenes import SCENES
 from companion.sim.episode import Simulator, _WalkerContacts
 from companion.sim.runner import run_one
 from companion.sim.scenario import load_scenario, scenario_from_mapping
-from companion.types import LOG_COLUMNS, Command, Log
+from companion.sim.sensing import in_view
+from companion.types import LOG_COLUMNS, Circle, Command, Log, PersonState, Pose, Wall
 
 
 def _walk(crowd: Crowd, steps: int, robot=(1e6, 1e6, 0.0, 0.0)) -> np.ndarray:
@@ -148,3 +151,50 @@ def test_a_crowd_episode_is_the_same_in_a_worker_process():
     for log in there:
         assert np.array_equal(log["robot_x"], here["robot_x"])
         assert np.array_equal(log["walker_gap_m"], here["walker_gap_m"], equal_nan=True)
+
+
+def test_losing_refinding_searching_and_view_are_counted_across_blocks():
+    n = 100
+    cols = {c: np.zeros(n) for c in LOG_COLUMNS}
+    cols.update(t=np.arange(n) * 0.05, walker_gap_m=np.full(n, np.nan),
+                person_in_view=np.where(np.arange(n) < 75, 1.0, 0.0))
+    reason = np.array([""] * n, dtype=object)
+    reason[20:30] = "person_lost"
+    reason[30:40] = "person_lost+search_turn"
+    reason[40:45] = "reacquiring"                          # still lost until the track resumes
+    reason[80:] = "person_lost"                             # lost again, not re-found
+    log = Log({**cols, "status": np.array(["ok"] * n), "reason": reason.astype(str)})
+    for size in (n, 7, 1):
+        social = metrics.Social()
+        for a in range(0, n, size):
+            social.add(Log({k: v[a:a + size] for k, v in log.columns.items()}))
+        m = social.value()
+        assert (m["person_losses"], m["person_refinds"]) == (2, 1)
+        assert m["person_refind_chances"] == 1      # in view 1.25 s of the first loss only
+        assert m["search_time_s"] == pytest.approx(0.5)
+        assert m["person_in_view_share"] == pytest.approx(0.75)
+
+
+def test_the_detector_sees_within_its_range_and_not_through_walkers():
+    sc = load_scenario("crowd-crossing")
+    near = sc.params.replace(sensing=dataclasses.replace(REALISTIC, person_range_m=1.3))
+    m = metrics.compute(run_one(dataclasses.replace(sc, params=near).episode("lqr")))
+    assert 0.0 < m["person_in_view_share"] < 1.0 and m["person_losses"] >= 1
+    m = metrics.compute(run_one(dataclasses.replace(
+        sc, params=sc.params.replace(sensing=REALISTIC)).episode("lqr")))
+    assert m["person_in_view_share"] == 1.0 and m["person_losses"] == 0
+    robot, person = Pose(0.0, 0.0, 0.0), PersonState(3.0, 0.0, 0.0, 1.0, 0.0)
+    walker = (Circle(1.5, 0.1, 0.25),)
+    hides = dataclasses.replace(REALISTIC, person_occlusion=True)
+    assert in_view(robot, person, walker, REALISTIC)
+    assert not in_view(robot, person, walker, hides)
+    assert in_view(robot, person, (Circle(1.5, 0.4, 0.25),), hides)
+    assert not in_view(robot, person, (), dataclasses.replace(REALISTIC, person_range_m=2.9))
+
+
+def test_line_of_sight_is_blocked_by_circles_and_crossing_walls():
+    assert line_of_sight(0.0, 0.0, 4.0, 0.0, (Circle(2.0, 0.3, 0.25),))
+    assert not line_of_sight(0.0, 0.0, 4.0, 0.0, (Circle(2.0, 0.2, 0.25),))
+    assert not line_of_sight(0.0, 0.0, 4.0, 0.0, (Wall(2.0, -1.0, 2.0, 1.0),))
+    assert line_of_sight(0.0, 0.0, 4.0, 0.0, (Wall(5.0, -1.0, 5.0, 1.0),
+                                              Wall(1.0, 0.5, 3.0, 0.5)))

@@ -1,7 +1,8 @@
 """Runs drawn as animations (``companion run --animate FILE``, ``fig4.gif`` of ``companion
 reproduce``): the person (true, and the tracker's estimate where it differs), each robot's
-footprint and heading, its desired slot, the obstacles with their influence ranges, LiDAR
-returns, the recent paths, the time and the supervisor's status when it is not ok.
+footprint and heading, its desired slot, the obstacles with their influence ranges, a
+crowd's walkers, LiDAR returns, the recent paths, the time and the supervisor's status when
+it is not ok.
 
 Frames are taken every ``speed / fps`` simulated seconds: real time (``speed`` 1) for runs up
 to :data:`MAX_PLAYBACK_S`, longer runs faster, so an animation never has more than
@@ -22,6 +23,7 @@ from matplotlib.patches import Circle as Circle2D
 from companion.apps import movie, plots
 from companion.control.slot import slot_point
 from companion.params import Params
+from companion.sim.crowd import WALKER_RADIUS
 from companion.sim.lidar import cast, scan_points
 from companion.sim.scenario import Scenario
 from companion.sim.sensing import LidarPerception
@@ -48,7 +50,10 @@ HEADING = 0.5
 LIDAR = "tab:cyan"
 """Colour of the LiDAR returns of a single run (several runs: each in its robot's)."""
 
-LATE_LABELS = ("desired slot of R", "LiDAR returns")
+WALKER = "tab:gray"
+"""Colour of a crowd's walkers (those of the first run where several are drawn)."""
+
+LATE_LABELS = ("desired slot of R", "walkers", "LiDAR returns")
 """Legend entries listed after the robots."""
 
 DPI = 80
@@ -101,11 +106,19 @@ def lidar_returns(log: Log, k: int, sc: Scenario) -> np.ndarray:
     p = sc.params
     every = LidarPerception(p).every
     j = k - k % every
-    circles = [ob for ob in sc.obstacles if isinstance(ob, Circle)]
+    circles = [ob for ob in sc.obstacles if isinstance(ob, Circle)] + walkers_at(log, j)
     walls = [ob for ob in sc.obstacles if isinstance(ob, Wall)]
     pose = Pose(log["robot_x"][j], log["robot_y"][j], log["robot_theta"][j])
     scan = cast(pose, circles, walls, (log["person_x"][j], log["person_y"][j]), p.lidar)
     return scan_points(scan)
+
+
+def walkers_at(log: Log, k: int) -> list[Circle]:
+    """The bodies of a crowd's walkers at row ``k`` (none without a crowd)."""
+    if "walkers_xy" not in log.columns:
+        return []
+    xy = log["walkers_xy"][k]
+    return [Circle(float(x), float(y), WALKER_RADIUS) for x, y in zip(xy[0::2], xy[1::2])]
 
 
 def _has_estimate(log: Log) -> bool:
@@ -181,6 +194,9 @@ class _Scene:
         plots.draw_obstacles(ax, sc.obstacles, p.avoidance, p.robot.radius)
         first = next(iter(runs.values()))
         (self.person_trail,) = ax.plot([], [], color=plots.PERSON, lw=1.2, alpha=0.6)
+        self.walkers = [ax.add_patch(Circle2D((0.0, 0.0), c.radius, color=WALKER, alpha=0.7,
+                                              zorder=4, label=None if i else "walkers"))
+                        for i, c in enumerate(walkers_at(first, 0))]
         self.person = _body(ax, p.lidar.person_radius, plots.PERSON, "person")
         self.robots, self.trails, self.slots, self.estimates, self.scans = {}, {}, {}, {}, {}
         for name, color in plots.colors(runs).items():
@@ -222,6 +238,7 @@ class _Scene:
         self.t = first["t"]
         self.dynamic = sorted(
             [self.person.disc, self.person.tick, self.person_trail, self.clock, self.status,
+             *self.walkers,
              *self.trails.values(), *self.slots.values(), *self.scans.values(),
              *(a for b in (*self.robots.values(), *self.estimates.values())
                for a in (b.disc, b.tick))], key=lambda a: a.get_zorder())
@@ -251,6 +268,8 @@ class _Scene:
         first = next(iter(self.runs.values()))
         px, py, pth = (first[c][k] for c in ("person_x", "person_y", "person_theta"))
         self.person.move(px, py, pth, HEADING)
+        for patch, c in zip(self.walkers, walkers_at(first, k)):
+            patch.set_center((c.x, c.y))
         self.person_trail.set_data(first["person_x"][lo:k + 1], first["person_y"][lo:k + 1])
         stopped = []
         for name, log in self.runs.items():

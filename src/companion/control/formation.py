@@ -48,8 +48,10 @@ def side_of(robot: Pose, person: PersonState) -> float:
 def side_room(person: PersonState, side: float, obstacles: Sequence[Obstacle],
               ahead: float = AHEAD) -> float:
     """Room (m) on ``side`` (+1 left, -1 right) of the person's way: the smallest sideways
-    distance from the line of the person's heading to an obstacle lying within ``ahead`` m
-    ahead of the person (0 where one crosses the line there); inf if none."""
+    distance from the line of the person's heading to a standing obstacle lying within
+    ``ahead`` m ahead of the person (0 where one crosses the line there); inf if none. Moving
+    circles (walkers) do not narrow the way: they pass, and avoidance and the keep-out see
+    them."""
     c, s = math.cos(person.theta), math.sin(person.theta)
 
     def frame(x: float, y: float) -> tuple[float, float]:    # (along, sideways on ``side``)
@@ -59,6 +61,8 @@ def side_room(person: PersonState, side: float, obstacles: Sequence[Obstacle],
     room = math.inf
     for ob in obstacles:
         if isinstance(ob, Circle):
+            if ob.moving:
+                continue
             along, lat = frame(ob.x, ob.y)
             if -ob.radius <= along <= ahead + ob.radius:
                 room = min(room, max(lat - ob.radius, 0.0) if lat > -ob.radius else math.inf)

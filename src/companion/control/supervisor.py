@@ -8,7 +8,8 @@ and the person estimate. Per call:
 
 1. clock (:class:`~companion.control.checks.Clock`);
 2. the person: detections to the tracker (:class:`~companion.tracking.PersonTracker`), the
-   one place that decides whether the person is seen, predicted or lost; a lost person
+   one place that decides whether the person is seen, predicted or lost (the detections it
+   takes for other people are tracked as moving obstacles); a lost person
    means a controlled stop, then (``search.max_time_s`` > 0) a search
    (:class:`~companion.control.search.Search`);
 3. robot pose, obstacles and scan (:mod:`companion.control.checks`);
@@ -41,9 +42,17 @@ from companion.control.search import Search
 from companion.control.slot import reference_point, slot_point
 from companion.geometry import unicycle_step, wrap_pi
 from companion.params import Params
-from companion.perception import checked_scan
-from companion.tracking import PersonTracker, exact_detection, predict
-from companion.types import Command, Observation, PersonDetection, PersonEstimate, Pose, Scan
+from companion.perception import MovingTracker, checked_scan
+from companion.tracking import PersonTracker, Reidentify, exact_detection, predict
+from companion.types import (
+    Circle,
+    Command,
+    Observation,
+    PersonDetection,
+    PersonEstimate,
+    Pose,
+    Scan,
+)
 
 OK, DEGRADED, STOPPED = "ok", "degraded", "stopped"
 
@@ -64,6 +73,7 @@ class SafetySupervisor:
         self._clock = checks.Clock(params.dt, params.supervisor.max_step_ratio)
         self._odometry = checks.Odometry(params.robot)
         self._tracker = PersonTracker(params.tracker, params.sensing)
+        self._others = MovingTracker(params.movers)   # the other people detected
         self.delays = DelayMeter(params)
         self._search = Search(params)
         self.reset()
@@ -81,6 +91,7 @@ class SafetySupervisor:
         self._clock.reset()
         self._odometry.reset()
         self._tracker.reset()
+        self._others.reset()
         self.delays.reset()
         self._sensor_t = 0.0          # the sensor clock: the last valid time, periods counted on
         self._poses: deque[tuple[float, Pose]] = deque()   # for robot-frame detections
@@ -101,6 +112,7 @@ class SafetySupervisor:
             self._sensor_t = obs.t
             self._remember(obs.t, obs.robot)
             self._tracker.add(self._detections(obs), obs.t, self._pose_at, reasons)
+            self._track_others(self._tracker.others)
             self.delays.detections(obs.detections, obs.t)
             self._inner_fresh |= self._tracker.reacquired
         else:
@@ -121,6 +133,7 @@ class SafetySupervisor:
         obstacles = tuple(ob for ob in obs.obstacles if checks.obstacle_is_finite(ob))
         if len(obstacles) < len(obs.obstacles):
             reasons.append("obstacle_invalid")
+        obstacles += self._others.circles(self._sensor_t)
         if estimate is not None:
             self._last = estimate
             self._search.reset()
@@ -208,7 +221,25 @@ class SafetySupervisor:
         self._inner_fresh = True
         self._far_since = None
 
+    @property
+    def reidentify(self) -> Reidentify | None:
+        """The re-identification hook of the person tracker (:data:`Reidentify`): after a
+        loss, a detection is the person where it returns True, is not where False, and the
+        tracker's prediction decides where None (or no hook)."""
+        return self._tracker.reidentify
+
+    @reidentify.setter
+    def reidentify(self, hook: Reidentify | None) -> None:
+        self._tracker.reidentify = hook
+
     # -- the pieces -----------------------------------------------------------------------
+
+    def _track_others(self, others: list[PersonDetection]) -> None:
+        """The other people on the person topic (detections the tracker's gate kept out), as
+        moving obstacles (:class:`~companion.perception.MovingTracker`)."""
+        r = self.params.movers.person_radius
+        for t in sorted({d.t for d in others}):
+            self._others.update([Circle(d.x, d.y, r) for d in others if d.t == t], t)
 
     def _switch(self, bearing: float) -> Params:
         """Put the formation's ``bearing`` in force (the adaptive policy chose the other

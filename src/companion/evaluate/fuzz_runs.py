@@ -74,6 +74,31 @@ def failure_rates(cases: Sequence[fuzz.Case], counts: Sequence[dict]) -> dict[st
     return out
 
 
+#: The fuzz's walker is blind (docs/safety.md, "Which walker is which"): it turns or sets off
+#: into the robot within tenths of a second. Against it under any sensing but ``ideal`` the
+#: exact 95 % upper bound of the robot-caused failure rate must be at most this.
+BLIND_WALKER_BOUND = 0.01
+
+
+def missed_criteria(rates: dict[str, dict]) -> list[str]:
+    """The fuzz's criteria each sensing profile misses, one line each: with ``ideal`` sensing
+    no robot-caused failure at all; with any other, the upper end of the 95 % interval of the
+    robot-caused failure rate at most :data:`BLIND_WALKER_BOUND` (which needs at least 299
+    episodes without one). Contacts the walker caused count for neither."""
+    out = []
+    for sensing, r in rates.items():
+        k, n, hi = r["robot_failed_episodes"], r["episodes"], r["ci95"][1]
+        if sensing == "ideal":
+            if k:
+                out.append(f"ideal: the robot failed by its own doing in {k} of {n} episodes "
+                           f"(criterion: none)")
+        elif hi > BLIND_WALKER_BOUND:
+            out.append(f"{sensing}: the robot-caused failure rate's 95 % upper bound is "
+                       f"{hi:.1%} over {n} episodes (criterion: at most "
+                       f"{BLIND_WALKER_BOUND:.0%}; {k} failed)")
+    return out
+
+
 def rates_text(rates: dict[str, dict]) -> str:
     """The lines :func:`failure_rates` prints, one per sensing profile."""
     return "\n".join(

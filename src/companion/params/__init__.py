@@ -38,15 +38,17 @@ from companion.params.sensing import (
     REALISTIC,
     ExtractorParams,
     LidarParams,
+    MoverParams,
     SensingParams,
     TrackerParams,
 )
 
 __all__ = ["BEHIND", "FRONT", "IDEAL", "LEFT", "PROFILES", "REALISTIC", "RIGHT", "SIDES",
            "AvoidanceParams", "ExtractorParams", "Formation", "ImpedanceParams", "SearchParams",
-           "KeepOutParams", "LidarParams", "LqrParams", "Params", "PidParams", "RobotParams",
-           "SensingParams", "SupervisorParams", "TrackerParams", "VsmParams", "load_params",
-           "load_sensing", "params_from_mapping", "sensing_params", "side_to_bearing"]
+           "KeepOutParams", "LidarParams", "MoverParams", "LqrParams", "Params", "PidParams",
+           "RobotParams", "SensingParams", "SupervisorParams", "TrackerParams", "VsmParams",
+           "load_params", "load_sensing", "params_from_mapping", "sensing_params",
+           "side_to_bearing"]
 
 
 @ranged("[0.001, 1]")
@@ -71,6 +73,7 @@ class Params(Validated):
     avoidance: AvoidanceParams = param(AvoidanceParams(), "", "")
     lidar: LidarParams = param(LidarParams(), "", "")
     extractor: ExtractorParams = param(ExtractorParams(), "", "")
+    movers: MoverParams = param(MoverParams(), "", "")
     pid: PidParams = param(PidParams(), "", "")
     vsm: VsmParams = param(VsmParams(), "", "")
     impedance: ImpedanceParams = param(ImpedanceParams(), "", "")

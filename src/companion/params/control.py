@@ -159,6 +159,11 @@ class KeepOutParams(Validated):
                                   "often; 0: whenever the worst case comes near)", _risk)
     person_radius: float = param(0.2, "m", "radius of the person's body in the collision risk "
                                  "(contact: the footprint's radius plus this)", non_negative)
+    give_way_margin: float = param(0.05, "m", "give way: when a moving obstacle (a walker, at "
+                                   "constant velocity) would come within this of the footprint "
+                                   "over evasive_horizon_s on the command's path, the evasive "
+                                   "check chooses the nearest command that keeps clear; 0 "
+                                   "switches giving way off", non_negative)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -235,6 +240,9 @@ class AvoidanceParams(Validated):
                                "cone's edge (ours; a negative value uses the paper's phi)")
     tie_band: float = param(0.15, "rad", "inside the collision cone, obstacles with |phi| below "
                             "this are passed on the side away from the person", non_negative)
+    prediction_horizon_s: float = param(2.0, "s", "moving obstacles (walkers) are steered "
+                                        "around where they will be when closest to the robot "
+                                        "within this; 0: where they are", non_negative)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -73,6 +73,12 @@ class SensingParams(Validated):
                                   non_negative)
     lidar_rate_hz: float = param(10.0, "Hz", "LiDAR scans per second (held between scans)",
                                  positive)
+    person_range_m: float = param(math.inf, "m", "the simulated person detector sees the "
+                                  "person only within this distance of the robot; inf: at any "
+                                  "distance", positive_or_inf)
+    person_occlusion: bool = param(False, "-", "the simulated person detector does not see "
+                                   "the person behind a walker or an obstacle (the line from "
+                                   "the robot to the person's centre blocked)")
 
     @property
     def declared_noise_m(self) -> float:
@@ -174,6 +180,14 @@ class TrackerParams(Validated):
     reacquire_time_s: float = param(0.3, "s", "after the person was lost, detections must agree "
                                     "with each other for this long before the track resumes",
                                     non_negative)
+    refind_spread_mps: float = param(1.0, "m/s", "after a loss, a detection re-finds the "
+                                     "person only within gate_floor_m plus this times the time "
+                                     "since the last one of where the lost track predicted the "
+                                     "person (at constant velocity for at most "
+                                     "refind_horizon_s), unless the re-identification hook "
+                                     "decides; inf: anywhere", positive_or_inf)
+    refind_horizon_s: float = param(5.0, "s", "how long the lost track's velocity is carried "
+                                    "on in that prediction", non_negative)
     standing_speed: float = param(0.2, "m/s", "below this estimated speed the person stands: "
                                   "the heading is held at its last walking value and the turn "
                                   "rate is 0 (positions alone tell no heading then)",
@@ -231,7 +245,7 @@ class LidarParams(Validated):
 
 @dataclasses.dataclass(frozen=True)
 class ExtractorParams(Validated):
-    """Turning a LiDAR scan into circular obstacles (:mod:`companion.perception`)."""
+    """Turning a LiDAR scan into circular obstacles (:mod:`companion.perception.extract`)."""
 
     cluster_gap: float = param(0.15, "m", "consecutive returns farther apart than this (and "
                                "than the adaptive breakpoint distance) start a new cluster; so "
@@ -268,3 +282,29 @@ class ExtractorParams(Validated):
         if self.min_radius > self.max_radius:
             raise ConfigError(f"min_radius: expected at most max_radius "
                               f"({self.max_radius:g} m), got {self.min_radius:g}")
+
+
+@dataclasses.dataclass(frozen=True)
+class MoverParams(Validated):
+    """Tracking moving things: LiDAR clusters and the other people detected on the person
+    topic, each with a constant-velocity Kalman filter (:mod:`companion.perception.movers`,
+    docs/crowds.md)."""
+
+    max_radius: float = param(0.5, "m", "LiDAR circles larger than this (or standing for a "
+                              "piece of a wall) are not tracked: they are not people",
+                              positive)
+    gate_m: float = param(0.4, "m", "a circle belongs to a track if it is within this of the "
+                          "track's prediction, plus max_speed times the time since the "
+                          "track's last circle", positive)
+    max_speed: float = param(2.5, "m/s", "fastest a tracked thing moves", positive)
+    accel_std: float = param(1.5, "m/s^2", "standard deviation of the white acceleration of "
+                             "the filter's constant-velocity model", positive)
+    position_std: float = param(0.08, "m", "standard deviation of a circle's centre (a "
+                                "LiDAR fit moves with the side of the body it sees)", positive)
+    confirm: int = param(3, "-", "a track is reported after this many circles", at_least_one)
+    forget_s: float = param(0.5, "s", "a track without a circle for longer is dropped",
+                            positive)
+    min_speed: float = param(0.25, "m/s", "slower tracks, or whose speed is within 3 "
+                             "standard deviations of 0, are reported standing", non_negative)
+    person_radius: float = param(0.25, "m", "radius of the body of another person detected "
+                                 "on the person topic, as an obstacle", positive)

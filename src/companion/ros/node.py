@@ -30,7 +30,7 @@ from companion.control.avoidance import influence_range
 from companion.control.slot import slot_point
 from companion.geometry import unicycle_step, wrap_pi
 from companion.model import relative_state
-from companion.perception import extract_obstacles
+from companion.perception import LidarObstacles
 from companion.ros import convert, graph
 from companion.ros.convert import OdometrySample, TimeBase, person_types
 from companion.ros.parameters import ParameterServer
@@ -94,6 +94,7 @@ class CompanionNode:
         self._scans: list[tuple[float, float, Any]] = []     # (stamp, arrival, LaserScan)
         self._scan_t = -math.inf                             # stamp of the last scan used
         self._obstacles: tuple[Circle, ...] = ()
+        self._lidar = LidarObstacles(config.params.extractor, config.params.movers)
         self._scan_seen: Any = None
         self._people: list[tuple[PersonDetection, float]] = []       # (detection, arrival)
         self._sim_time: float | None = None
@@ -354,8 +355,7 @@ class CompanionNode:
             return
         self._scan_t = t
         self._scan_seen = convert.scan_from(msg, flat(where))
-        self._obstacles = tuple(extract_obstacles(self._scan_seen, self._seen,
-                                                  self.config.params.extractor))
+        self._obstacles = self._lidar.update(self._scan_seen, t, self._seen)
 
     def _cannot_place(self, key: str, frame: str) -> None:
         """Remember (until the next look at the graph) that inputs of ``key`` in ``frame``

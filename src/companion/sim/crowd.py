@@ -169,5 +169,7 @@ class Crowd:
         return speed * (gx - x) / dist, speed * (gy - y) / dist
 
     def circles(self) -> tuple[Circle, ...]:
-        """The walkers' bodies (not the person's) where they are now, as obstacles."""
-        return tuple(Circle(float(x), float(y), WALKER_RADIUS) for x, y in self.positions[:-1])
+        """The walkers' bodies (not the person's) where they are now, with their velocities,
+        as obstacles."""
+        return tuple(Circle(float(x), float(y), WALKER_RADIUS, None, float(vx), float(vy))
+                     for (x, y), (vx, vy) in zip(self.positions[:-1], self.velocities[:-1]))

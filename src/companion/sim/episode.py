@@ -31,7 +31,7 @@ from companion.sim.crowd import WALKER_RADIUS, Crowd
 from companion.sim.faults import Fault, stalled
 from companion.sim.faults import apply as apply_faults
 from companion.sim.person import PersonMotion
-from companion.sim.sensing import GroundTruth, Perception, PersonSensor, streams
+from companion.sim.sensing import GroundTruth, Perception, PersonSensor, in_view, streams
 from companion.types import LOG_COLUMNS, Command, Log, Observation, Obstacle, PersonState, Pose
 
 _NO_ESTIMATE = (math.nan,) * 6
@@ -180,13 +180,14 @@ def _drive(sim: Simulator, act: Callable[[Observation], Command | None], seed: i
     obs = sim.reset(seed)
     if started is not None:
         started(sim)
-    block = _Block(min(rows, sim.steps))
+    walkers = 0 if sim.crowd is None else sim.crowd.n
+    block = _Block(min(rows, sim.steps), walkers)
     while obs is not None:
         obs = sim.step(None if sim.stalled else act(obs))
-        block.add(*sim.row)
+        block.add(*sim.row, sim.walkers_row)
         if block.full() or obs is None:
             yield block.log()
-            block = _Block(min(rows, sim.steps - sim.k))
+            block = _Block(min(rows, sim.steps - sim.k), walkers)
 
 
 class Simulator:
@@ -214,6 +215,8 @@ class Simulator:
         self._start_velocity = start_velocity
         self.k = 0
         self.row: tuple[tuple[float, ...], str, str] | None = None
+        #: The walkers' positions at the sample of :attr:`row` (x0, y0, x1, ...; crowds only).
+        self.walkers_row: np.ndarray | None = None
 
     def reset(self, seed: int = 0) -> Observation:
         """Start the episode over with the sensing noise of ``seed``; the first observation.
@@ -256,19 +259,25 @@ class Simulator:
         """The observation of sample :attr:`k`, as the active faults corrupt it."""
         t = self.k * self.params.dt
         h = self.person.state(t)
-        arrived = (*self._handover, *self._sensor.detections(t)) if self.detections else ()
+        pose = Pose(self._x, self._y, self._th)
+        self._in_view = in_view(pose, h, self._blockers(), self.params.sensing)
+        arrived = (*self._handover, *self._sensor.detections(t, self._in_view)) \
+            if self.detections else ()
         self._handover = ()
         if not self.detections:
             self._seen = (h.x, h.y)
         elif arrived:
             self._seen = (arrived[-1].x, arrived[-1].y)
-        pose = Pose(self._x, self._y, self._th)
-        world = self.obstacles if self.crowd is None else self.obstacles + self.crowd.circles()
+        world = self._blockers()
         known = self.perception.obstacles(self.k, pose, world, (h.x, h.y), self._seen,
                                           self._rng["lidar"])
         obs = Observation(t, pose, None if self.detections else h, known,
                           self.perception.scan(), (self._va, self._wa), arrived)
         return apply_faults(obs, self.faults)
+
+    def _blockers(self) -> tuple[Obstacle, ...]:
+        """The world's obstacles now: the scenario's and the walkers'."""
+        return self.obstacles if self.crowd is None else self.obstacles + self.crowd.circles()
 
     def step(self, command: Command | None) -> Observation | None:
         """Apply ``command`` from the current sample on (None: no new command, as from a
@@ -304,8 +313,10 @@ class Simulator:
                      nearest_clearance(x, y, self.obstacles, p.robot.radius), va, wa, *est,
                      *error_split(Pose(x, y, th), h, cmd, p),
                      math.hypot(h.x - x, h.y - y) - p.robot.radius - p.lidar.person_radius,
-                     *self._walkers.sample(x, y, self.crowd)), cmd.status, cmd.reason)
+                     *self._walkers.sample(x, y, self.crowd), float(self._in_view)),
+                    cmd.status, cmd.reason)
         if self.crowd is not None:
+            self.walkers_row = self.crowd.positions[:-1].ravel().copy()
             self.crowd.step((x, y, va * math.cos(th), va * math.sin(th)))
         x, y, th, self._va, self._wa = base_step(x, y, th, va, wa, *self._base,
                                                  p.sensing.actuator_tau_s, p.dt)
@@ -342,14 +353,19 @@ class _WalkerContacts:
 
 
 class _Block:
-    """Rows of a log being filled, numbers in one array, texts in lists."""
+    """Rows of a log being filled, numbers in one array, texts in lists, and the positions
+    of a crowd's ``walkers`` (the log's column ``walkers_xy``, rows of x0, y0, x1, ...)."""
 
-    def __init__(self, rows: int):
+    def __init__(self, rows: int, walkers: int = 0):
         self.numbers = np.empty((rows, len(LOG_COLUMNS)))
+        self.walkers = np.empty((rows, 2 * walkers)) if walkers else None
         self.status: list[str] = []
         self.reason: list[str] = []
 
-    def add(self, numbers: tuple[float, ...], status: str, reason: str) -> None:
+    def add(self, numbers: tuple[float, ...], status: str, reason: str,
+            walkers: np.ndarray | None = None) -> None:
+        if self.walkers is not None:
+            self.walkers[len(self.status)] = walkers
         self.numbers[len(self.status)] = numbers
         self.status.append(status)
         self.reason.append(reason)
@@ -361,4 +377,6 @@ class _Block:
         columns = {name: self.numbers[:, i] for i, name in enumerate(LOG_COLUMNS)}
         columns["status"] = np.array(self.status, dtype=str)
         columns["reason"] = np.array(self.reason, dtype=str)
+        if self.walkers is not None:
+            columns["walkers_xy"] = self.walkers
         return Log(columns)

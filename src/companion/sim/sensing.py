@@ -12,14 +12,16 @@ same LiDAR noise.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Protocol
 
 import numpy as np
 
 from companion.errors import ConfigError
-from companion.params import Params
-from companion.perception import extract_obstacles
+from companion.geometry import line_of_sight
+from companion.params import Params, SensingParams
+from companion.perception import LidarObstacles
 from companion.sim.lidar import cast
 from companion.sim.person import PersonMotion
 from companion.types import Circle, Obstacle, PersonDetection, PersonState, Pose, Scan, Wall
@@ -71,8 +73,11 @@ class PersonSensor:
                                stds[0], h.v + stds[1] * e[3], h.omega + stds[1] * e[4],
                                (stds[1], stds[1]))
 
-    def detections(self, t: float) -> tuple[PersonDetection, ...]:
-        """The detections that arrive by control time ``t`` since the last call."""
+    def detections(self, t: float, in_view: bool = True) -> tuple[PersonDetection, ...]:
+        """The detections that arrive by control time ``t`` since the last call; none while
+        the person is not ``in_view`` (out of range or hidden, :func:`in_view`, judged at
+        ``t``: the latency is a tenth of a second). The noise is drawn either way, so what a
+        controller's motion hides does not change the later detections of the seed."""
         last = t - self.sensing.person_latency_s
         if not self.period:
             times = [last] if last >= 0.0 else []
@@ -81,7 +86,9 @@ class PersonSensor:
             while self.next <= last + 1e-9:
                 times.append(self.next)
                 self.next += self.period
-        return tuple(d for d in map(self._detect, times) if d is not None)
+        made = [d for d in map(self._detect, times) if d is not None]   # draws as if seen
+        return tuple(made) if in_view else ()
+
 
     def _detect(self, ts: float) -> PersonDetection | None:
         s = self.sensing
@@ -104,6 +111,17 @@ class PersonSensor:
         return PersonDetection(ts, h.x + pos * e[0], h.y + pos * e[1], self.frame,
                                (var, 0.0, 0.0, var), heading, heading_std, speed,
                                turn, velocity_std)
+
+
+def in_view(robot: Pose, person: PersonState, blockers: Sequence[Obstacle],
+            sensing: SensingParams) -> bool:
+    """Whether the simulated person detector on ``robot`` can see ``person``: within
+    ``person_range_m`` and, with ``person_occlusion``, no walker or obstacle of ``blockers``
+    on the line between them."""
+    if math.hypot(person.x - robot.x, person.y - robot.y) > sensing.person_range_m:
+        return False
+    return not sensing.person_occlusion or line_of_sight(robot.x, robot.y, person.x,
+                                                         person.y, blockers)
 
 
 class Perception(Protocol):
@@ -137,17 +155,20 @@ class GroundTruth:
 class LidarPerception:
     """The controller sees what a simulated LiDAR detects: a scan every
     ``round(1 / (sensing.lidar_rate_hz * dt))`` steps, cast against the true obstacles and the
-    person's body, turned into circles by :func:`companion.perception.extract_obstacles` (the
-    tracked person, at its estimated position, is excluded) and held until the next scan."""
+    person's body, turned into circles by :class:`companion.perception.LidarObstacles` (the
+    tracked person, at its estimated position, is excluded; moving ones with their
+    velocities) and held until the next scan."""
 
     def __init__(self, params: Params):
         self.params = params
         self.every = max(1, round(1.0 / (params.sensing.lidar_rate_hz * params.dt)))
+        self.front = LidarObstacles(params.extractor, params.movers)
         self.reset()
 
     def reset(self) -> None:
         self.held: tuple[Obstacle, ...] = ()
         self.last_scan: Scan | None = None
+        self.front.reset()
 
     def obstacles(self, step: int, robot: Pose, world: Sequence[Obstacle],
                   person_true: tuple[float, float], person_seen: tuple[float, float],
@@ -157,7 +178,7 @@ class LidarPerception:
             walls = [ob for ob in world if isinstance(ob, Wall)]
             scan = cast(robot, circles, walls, person_true, self.params.lidar, rng)
             self.last_scan = scan
-            self.held = tuple(extract_obstacles(scan, person_seen, self.params.extractor))
+            self.held = self.front.update(scan, step * self.params.dt, person_seen)
         return self.held
 
     def scan(self) -> Scan | None:

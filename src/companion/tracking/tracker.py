@@ -5,7 +5,8 @@ Mahalanobis distance of their position (another person, or an identity switch, f
 outside), and merged in time order into the walker filter (:mod:`.walker`): a late
 detection re-filters the detections after it. Between detections the track is predicted;
 after ``lost_after_s`` s without one, or when its position grows too uncertain, the person is
-lost, and a new track needs ``reacquire_time_s`` s of consistent detections. Detections that
+lost, and a new track needs ``reacquire_time_s`` s of consistent detections where the lost
+track may have gone (or that a re-identification hook accepts). Detections that
 give no covariance take the declared sensing's noise; the position variance is then scaled,
 within bounds, by how far the detections fall from the prediction on average (a detector
 noisier than it declares). While detections fall farther from the prediction than
@@ -38,6 +39,10 @@ from companion.types import PersonDetection, PersonEstimate, PersonState, Pose
 #: Largest plausible coordinate (m) and standard deviation (m, rad, m/s) of a detection.
 MAX_COORDINATE = 1e6
 
+#: The re-identification hook: given a detection after a loss and the person as last
+#: tracked, True (it is the person), False (it is not) or None (let the prediction decide).
+Reidentify = Callable[[PersonDetection, PersonState], "bool | None"]
+
 
 def _plausible(d: PersonDetection) -> bool:
     """Finite, with coordinates and uncertainties a person detector could give."""
@@ -65,12 +70,16 @@ class PersonTracker:
     control step; ``reacquired`` is True after a step that ended an outage, and
     ``innovations`` holds the position NIS of each detection the last :meth:`add` applied
     (its squared Mahalanobis distance from the prediction: chi-square with 2 degrees of
-    freedom for an honest filter). ``sensing`` is what the detector declares (default
-    ``realistic``)."""
+    freedom for an honest filter), ``others`` the detections it took for other people (seen
+    together with the person, outside the gate). ``sensing`` is what the detector declares (default
+    ``realistic``); ``reidentify`` (:data:`Reidentify`) decides, where it returns a bool,
+    whether a detection after a loss is the person."""
 
-    def __init__(self, params: TrackerParams, sensing: SensingParams | None = None):
+    def __init__(self, params: TrackerParams, sensing: SensingParams | None = None,
+                 reidentify: Reidentify | None = None):
         self._filter = WalkerFilter(params, sensing)
         self.params = self._filter.params
+        self.reidentify = reidentify
         self.reset()
 
     def reset(self) -> None:
@@ -80,6 +89,7 @@ class PersonTracker:
         self.lost = False
         self.reacquired = False
         self.innovations: list[float] = []
+        self.others: list[PersonDetection] = []
 
     @property
     def noise_scale(self) -> float:
@@ -102,6 +112,7 @@ class PersonTracker:
         reasons = [] if reasons is None else reasons
         self.reacquired = False
         self.innovations = []
+        self.others = []
         good = [d for d in (self._checked(d, now, pose_at, reasons) for d in detections)
                 if d is not None]
         for t in sorted({d.t for d in good}):
@@ -153,7 +164,7 @@ class PersonTracker:
         if self._history and not self.lost and t - self._history[-1].t > self.params.lost_after_s:
             self.lost, self._candidate = True, []     # too long since the last one
         if not self._history or self.lost:
-            self._reacquire(group)
+            self._reacquire(group, reasons)
             return
         before = [h for h in self._history if h.t < t]
         if not before:                        # older than everything kept: too late to use
@@ -162,9 +173,10 @@ class PersonTracker:
         later = [h.detection for h in self._history if h.t >= t]
         prior = self._predicted(before[-1], t)
         best = self._best(before[-1], prior, group)
-        if best is None:
+        if best is None:                      # a lone jump: a glitch as likely as someone
             reasons.append("person_outlier")
             return
+        self.others += [d for d in group if d is not best]
         self._history = before
         self._apply(best, prior)
         for d in later:                       # re-filter what came after a late detection
@@ -240,12 +252,16 @@ class PersonTracker:
         scale = self._history[-1].noise_scale if self._history else 1.0
         return _Posterior(d.t, d, self._filter.start(d), noise_scale=scale)
 
-    def _reacquire(self, group: list[PersonDetection]) -> None:
+    def _reacquire(self, group: list[PersonDetection], reasons: list[str]) -> None:
         """No track (or lost): the first detection starts one; after a loss, detections must
-        agree with each other for ``reacquire_time_s`` first."""
+        be where the person may have gone (:meth:`_refound`) and agree with each other for
+        ``reacquire_time_s`` first."""
         p = self.params
         if not self._history and not self.lost:        # the first detection of an episode
             self._history = [self._start(group[0])]
+            return
+        group = [d for d in group if self._refound(d, reasons)]
+        if not group:
             return
         last = self._candidate[-1] if self._candidate else None
         d = group[0]
@@ -262,6 +278,29 @@ class PersonTracker:
                     self._candidate, self.lost, self.reacquired = [], False, True
                 return
         self._candidate = [d]
+
+    def _refound(self, d: PersonDetection, reasons: list[str]) -> bool:
+        """Whether ``d`` may be the lost person: what the re-identification hook says if it
+        says so, else whether ``d`` is within the re-find gate of where the lost track
+        predicted the person (``refind_spread_mps``, ``refind_horizon_s``)."""
+        if not self._history:
+            return True
+        p, last = self.params, self._history[-1]
+        x = last.belief.x
+        if self.reidentify is not None:
+            try:
+                verdict = self.reidentify(d, PersonState(float(x[0]), float(x[1]),
+                                                         math.atan2(x[3], x[2]),
+                                                         math.hypot(x[2], x[3]), float(x[4])))
+            except Exception:                 # a user's hook must not stop the robot
+                verdict = None
+                reasons.append("reidentify_failed")
+            if verdict is not None:
+                return bool(verdict)
+        dt = max(d.t - last.t, 0.0)
+        ahead = min(dt, p.refind_horizon_s)
+        gap = math.hypot(d.x - x[0] - x[2] * ahead, d.y - x[1] - x[3] * ahead)
+        return gap <= p.gate_floor_m + p.refind_spread_mps * dt
 
     # -- the estimate --------------------------------------------------------------------------
 

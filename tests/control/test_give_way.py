@@ -1,0 +1,50 @@
+"""Giving way to walkers: a robot that can move does not stand while a walker walks into it,
+and its own motion never closes on one (companion.control.evasive.give_way_target)."""
+
+import dataclasses
+import math
+
+import pytest
+
+from companion.control import make_controller
+from companion.geometry import unicycle_step
+from companion.params import Params
+from companion.types import Circle, Observation, PersonState, Pose
+
+WALKER_SPEED = 1.2
+
+
+def closest_gap(params: Params, walker_y: float = 1.0, duration: float = 5.0
+                ) -> tuple[float, list[str]]:
+    """A standing person at the origin facing +x, the robot in its left slot, and a blind
+    walker (constant velocity) coming along y = ``walker_y`` from 4 m ahead: the closest gap
+    between the footprint and the walker's body, and the reasons of the commands."""
+    stack = make_controller("lqr", params)
+    person = PersonState(0.0, 0.0, 0.0, 0.0, 0.0)
+    x, y, th, v, w = -params.robot.d, 1.0, 0.0, 0.0, 0.0
+    gap, reasons = math.inf, []
+    for k in range(round(duration / params.dt)):
+        t = k * params.dt
+        walker = Circle(4.0 - WALKER_SPEED * t, walker_y, 0.25, vx=-WALKER_SPEED)
+        gap = min(gap, math.hypot(walker.x - x, walker.y - y) - 0.25 - params.robot.radius)
+        cmd = stack.step(Observation(t, Pose(x, y, th), person, (walker,), None, (v, w)))
+        reasons.append(cmd.reason)
+        v, w = cmd.v, cmd.omega
+        x, y, th = unicycle_step(x, y, th, v, w, params.dt)
+    return gap, reasons
+
+
+def test_a_standing_robot_gives_way_to_a_walker_coming_at_it():
+    p = Params()
+    off = p.replace(keepout=dataclasses.replace(p.keepout, give_way_margin=0.0))
+    held, _ = closest_gap(off)
+    assert held < 0.0                         # without giving way the walker walks into it
+    gap, reasons = closest_gap(p)
+    assert gap > 0.0
+    assert any("give_way" in r for r in reasons)
+
+
+def test_a_walker_passing_clear_is_not_given_way_to():
+    gap, reasons = closest_gap(Params(), walker_y=3.0)
+    assert gap == pytest.approx(2.0 - 0.5, abs=0.05)
+    assert not any("give_way" in r for r in reasons)
