@@ -102,9 +102,11 @@ def main() -> None:
              f"{sum(r['path_length_m'] >= 30.0 for r in passage)}/{len(passage)}"),
             ("never within 0.5 m of the person", not near, f"{len(near)} episodes"),
             ("the person re-found in >= 95 % of the episodes with a chance",
-             refound >= 0.95 * len(chances), f"{refound}/{len(chances)}"),
+             refound >= 0.95 * len(chances) if chances else None,
+             f"{refound}/{len(chances)}" if chances else "no episode lost the person"),
         ]:
-            print(f"  {'PASS' if good else 'MISS'}  {text}: {value}")
+            mark = "n/a " if good is None else "PASS" if good else "MISS"
+            print(f"  {mark}  {text}: {value}")
 
 
 def _refound(rows: list[dict]) -> str:

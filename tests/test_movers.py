@@ -76,3 +76,6 @@ def test_avoidance_sees_a_walker_where_it_will_be():
     assert (ahead[0].x, ahead[0].y) == pytest.approx((4.0, 0.0), abs=1e-9)   # closest at 3 s
     assert predicted((walker,), 0.0, 0.0, 1.0, 0.0, horizon=5.0)[0].y == pytest.approx(-1.0)
     assert predicted((walker,), 0.0, 0.0, 1.0, 0.0, horizon=0.0)[0] == walker
+    passing = Circle(4.0, 1.5, 0.25, vx=-1.0)            # head-on, 1.5 m to the side
+    assert predicted((passing,), 0.0, 0.0, 1.0, 0.0, 2.0, reach=0.35)[0] == passing
+    assert predicted((walker,), 0.0, 0.0, 2.0, 0.0, 2.0, reach=0.35)[0].y == pytest.approx(0.0)

@@ -176,14 +176,22 @@ def closest_approach_time(dx: float, dy: float, dvx: float, dvy: float, horizon:
 
 
 def predicted(obstacles: Sequence[Obstacle], x: float, y: float, vx: float, vy: float,
-              horizon: float) -> tuple[Obstacle, ...]:
-    """The obstacles with every moving circle where it will be when closest to a point at
-    ``(x, y)`` moving at ``(vx, vy)`` (the robot), within ``horizon`` s: what avoidance steers
-    around. Standing obstacles and walls are as they are."""
+              horizon: float, reach: float = math.inf) -> tuple[Obstacle, ...]:
+    """The obstacles with every moving circle on a collision course where it will be when
+    closest to a point at ``(x, y)`` moving at ``(vx, vy)`` (the robot), within ``horizon`` s:
+    what avoidance steers around. On a collision course: at the closest its body comes within
+    ``reach`` of the point. Other circles, standing obstacles and walls are as they are."""
     if horizon <= 0.0:
         return tuple(obstacles)
-    return tuple(o.at(closest_approach_time(o.x - x, o.y - y, o.vx - vx, o.vy - vy, horizon))
-                 if isinstance(o, Circle) and o.moving else o for o in obstacles)
+    out = []
+    for o in obstacles:
+        if isinstance(o, Circle) and o.moving:
+            dx, dy, dvx, dvy = o.x - x, o.y - y, o.vx - vx, o.vy - vy
+            t = closest_approach_time(dx, dy, dvx, dvy, horizon)
+            if math.hypot(dx + dvx * t, dy + dvy * t) < o.radius + reach:
+                o = o.at(t)
+        out.append(o)
+    return tuple(out)
 
 
 class ObstacleArrays(NamedTuple):

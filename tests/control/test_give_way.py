@@ -9,7 +9,7 @@ import pytest
 from companion.control import make_controller
 from companion.geometry import unicycle_step
 from companion.params import Params
-from companion.types import Circle, Observation, PersonState, Pose
+from companion.types import Circle, Observation, PersonDetection, PersonState, Pose
 
 WALKER_SPEED = 1.2
 
@@ -48,3 +48,27 @@ def test_a_walker_passing_clear_is_not_given_way_to():
     gap, reasons = closest_gap(Params(), walker_y=3.0)
     assert gap == pytest.approx(2.0 - 0.5, abs=0.05)
     assert not any("give_way" in r for r in reasons)
+
+
+def test_another_person_on_the_person_topic_is_given_way_to():
+    """Detections of the companion and of a bystander walking at the robot arrive together;
+    the tracker keeps the companion and the bystander becomes a moving obstacle."""
+    p = Params()
+    stack = make_controller("lqr", p)
+    x, y, th, v, w = -p.robot.d, 1.0, 0.0, 0.0, 0.0
+    gap, reasons, estimates = math.inf, [], []
+    for k in range(round(4.0 / p.dt)):
+        t = k * p.dt
+        bx = 4.0 - WALKER_SPEED * t
+        seen = (PersonDetection(t, 0.0, 0.0, covariance=(1e-4, 0.0, 0.0, 1e-4)),
+                PersonDetection(t, bx, 1.0, covariance=(1e-4, 0.0, 0.0, 1e-4)))
+        cmd = stack.step(Observation(t, Pose(x, y, th), None, (), None, (v, w), seen))
+        gap = min(gap, math.hypot(bx - x, 1.0 - y) - p.movers.person_radius - p.robot.radius)
+        reasons.append(cmd.reason)
+        if cmd.estimate is not None:
+            estimates.append(math.hypot(cmd.estimate.state.x, cmd.estimate.state.y))
+        v, w = cmd.v, cmd.omega
+        x, y, th = unicycle_step(x, y, th, v, w, p.dt)
+    assert max(estimates) < 0.1                  # the track stayed on the companion
+    assert any("give_way" in r for r in reasons)
+    assert gap > 0.0

@@ -88,10 +88,10 @@ def collision_cone(obstacle: Obstacle, x: float, y: float, inflate: float) -> fl
 
 class AvoidingController:
     """Wraps any :class:`~companion.control.base.Controller` with behavioural-dynamics
-    avoidance of ``obs.obstacles`` (see the module docstring), moving ones where they will be
-    when closest to the robot (:func:`companion.geometry.predicted`, within
-    ``avoidance.prediction_horizon_s``); the command's ``u_ob`` field is the avoidance part of
-    omega."""
+    avoidance of ``obs.obstacles`` (see the module docstring), moving ones on a collision
+    course where they will be when closest to the robot (:func:`companion.geometry.predicted`,
+    within ``avoidance.prediction_horizon_s``); the command's ``u_ob`` field is the avoidance
+    part of omega."""
 
     def __init__(self, inner: Controller, params: Params):
         self.inner = inner
@@ -111,8 +111,9 @@ class AvoidingController:
         side = math.copysign(1.0, math.cos(r.theta) * (h.y - r.y)
                              - math.sin(r.theta) * (h.x - r.x))
         v = 0.0 if obs.robot_velocity is None else obs.robot_velocity[0]
+        a = self.params.avoidance
         ahead = predicted(obs.obstacles, r.x, r.y, v * math.cos(r.theta), v * math.sin(r.theta),
-                          self.params.avoidance.prediction_horizon_s)
+                          a.prediction_horizon_s, self.params.robot.radius + a.cone_margin)
         acc = total_acceleration(r.x, r.y, r.theta, ahead, self.params, side)
         tau = self.params.avoidance.decay_time
         u_ob = self.u_ob * self._decay + acc * tau * (1.0 - self._decay)
