@@ -34,14 +34,29 @@ def closest_gap(params: Params, walker_y: float = 1.0, duration: float = 5.0
     return gap, reasons
 
 
+def without(p: Params, give_way: bool = True, predict: bool = True) -> Params:
+    """``p`` without giving way and/or without avoidance's prediction of walkers."""
+    if not give_way:
+        p = p.replace(keepout=dataclasses.replace(p.keepout, give_way_margin=0.0))
+    if not predict:
+        p = p.replace(avoidance=dataclasses.replace(p.avoidance, prediction_horizon_s=0.0))
+    return p
+
+
 def test_a_standing_robot_gives_way_to_a_walker_coming_at_it():
-    p = Params()
-    off = p.replace(keepout=dataclasses.replace(p.keepout, give_way_margin=0.0))
-    held, _ = closest_gap(off)
-    assert held < 0.0                         # without giving way the walker walks into it
-    gap, reasons = closest_gap(p)
+    held, _ = closest_gap(without(Params(), give_way=False, predict=False))
+    assert held < 0.0                         # the walker walks into a robot that stands
+    gap, reasons = closest_gap(without(Params(), predict=False))
     assert gap > 0.0
     assert any("give_way" in r for r in reasons)
+
+
+def test_avoidance_steers_away_from_where_a_walker_will_be():
+    gap, reasons = closest_gap(without(Params(), give_way=False))
+    assert gap > 0.0
+    assert not any("give_way" in r for r in reasons)
+    both, _ = closest_gap(Params())
+    assert both > 0.0
 
 
 def test_a_walker_passing_clear_is_not_given_way_to():
@@ -53,7 +68,7 @@ def test_a_walker_passing_clear_is_not_given_way_to():
 def test_another_person_on_the_person_topic_is_given_way_to():
     """Detections of the companion and of a bystander walking at the robot arrive together;
     the tracker keeps the companion and the bystander becomes a moving obstacle."""
-    p = Params()
+    p = without(Params(), predict=False)
     stack = make_controller("lqr", p)
     x, y, th, v, w = -p.robot.d, 1.0, 0.0, 0.0, 0.0
     gap, reasons, estimates = math.inf, [], []
