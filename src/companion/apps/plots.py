@@ -73,11 +73,15 @@ def trajectories(runs: Runs, title: str = "", marker_period_s: float = 2.0,
                  obstacles: Sequence[Obstacle] = (), avoidance: AvoidanceParams | None = None,
                  footprint: float = 0.0) -> Figure:
     """Person and robot paths (one per run) with heading arrows every ``marker_period_s``
-    seconds (at most :data:`MAX_ARROWS` a path), and the obstacles with their influence
-    ranges (Fig. 3(a), Fig. 4(a))."""
+    seconds (at most :data:`MAX_ARROWS` a path), the obstacles with their influence ranges
+    (Fig. 3(a), Fig. 4(a)) and a crowd's walkers' paths."""
     fig, ax = plt.subplots(figsize=(7, 6), layout="constrained")
     draw_obstacles(ax, obstacles, avoidance, footprint)
     first = next(iter(runs.values()))
+    if "walkers_xy" in first.columns:          # a crowd's walkers (the first run's)
+        xy = first["walkers_xy"]
+        ax.plot(xy[:, 0::2], xy[:, 1::2], color="tab:gray", lw=0.8, alpha=0.4)
+        ax.plot([], [], color="tab:gray", lw=0.8, alpha=0.4, label="walkers")
     dt = float(first["t"][1] - first["t"][0]) if len(first) > 1 else 1.0
     # at most MAX_ARROWS arrows a path: a day-long run's would hide it
     every = max(int(round(marker_period_s / dt)), math.ceil(len(first) / MAX_ARROWS))
