@@ -180,12 +180,14 @@ class TrackerParams(Validated):
     reacquire_time_s: float = param(0.3, "s", "after the person was lost, detections must agree "
                                     "with each other for this long before the track resumes",
                                     non_negative)
-    refind_spread_mps: float = param(1.0, "m/s", "after a loss, a detection re-finds the "
+    refind_spread_mps: float = param(1.5, "m/s", "after a loss, a detection re-finds the "
                                      "person only within gate_floor_m plus this times the time "
-                                     "since the last one of where the lost track predicted the "
-                                     "person (at constant velocity for at most "
+                                     "since the last one of the way the lost track predicted "
+                                     "(from where the person was last seen to where the "
+                                     "track's velocity takes them in at most "
                                      "refind_horizon_s), unless the re-identification hook "
-                                     "decides; inf: anywhere", positive_or_inf)
+                                     "decides; 1.5: a brisk walk in any direction; inf: "
+                                     "anywhere", positive_or_inf)
     refind_horizon_s: float = param(5.0, "s", "how long the lost track's velocity is carried "
                                     "on in that prediction", non_negative)
     standing_speed: float = param(0.2, "m/s", "below this estimated speed the person stands: "

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.geometry import major_std, wrap_pi
+from companion.geometry import major_std, segment_point, wrap_pi
 from companion.params import SensingParams, TrackerParams
 from companion.tracking.walker import (
     Belief,
@@ -281,8 +281,9 @@ class PersonTracker:
 
     def _refound(self, d: PersonDetection, reasons: list[str]) -> bool:
         """Whether ``d`` may be the lost person: what the re-identification hook says if it
-        says so, else whether ``d`` is within the re-find gate of where the lost track
-        predicted the person (``refind_spread_mps``, ``refind_horizon_s``)."""
+        says so, else whether ``d`` is within the re-find gate of the way the lost track
+        predicted the person to go, from where it was last seen to where its velocity takes
+        it (``refind_spread_mps``, ``refind_horizon_s``)."""
         if not self._history:
             return True
         p, last = self.params, self._history[-1]
@@ -299,8 +300,8 @@ class PersonTracker:
                 return bool(verdict)
         dt = max(d.t - last.t, 0.0)
         ahead = min(dt, p.refind_horizon_s)
-        gap = math.hypot(d.x - x[0] - x[2] * ahead, d.y - x[1] - x[3] * ahead)
-        return gap <= p.gate_floor_m + p.refind_spread_mps * dt
+        gx, gy = segment_point(d.x, d.y, x[0], x[1], x[0] + x[2] * ahead, x[1] + x[3] * ahead)
+        return math.hypot(d.x - gx, d.y - gy) <= p.gate_floor_m + p.refind_spread_mps * dt
 
     # -- the estimate --------------------------------------------------------------------------
 
