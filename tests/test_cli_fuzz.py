@@ -1,11 +1,13 @@
 """``companion fuzz``: outputs, replay, exit codes and bad flags."""
 
 import csv
+import dataclasses
 import json
 
 import pytest
 
 from companion.evaluate import fuzz_runs
+from companion.params import Params
 from companion.sim import fuzz
 from test_cli import run  # the CLI in-process: exit code, stdout, stderr
 
@@ -153,3 +155,11 @@ def test_fuzz_exits_on_its_criteria_only():
     assert missed[0].startswith("ideal: the robot failed by its own doing in 1 of 400")
     assert missed[1].startswith("realistic: the robot-caused failure rate's 95 % upper bound "
                                 "is 1.4% over 400 episodes")
+
+
+def test_a_fuzz_episode_keeps_the_formation_policy_of_its_parameters():
+    base = Params().replace(formation=dataclasses.replace(Params().formation,
+                                                          policy="adaptive"))
+    case, spec = fuzz.draw(3, "lqr", "ideal", base)
+    assert spec.params.formation.policy == "adaptive"
+    assert spec.params.formation.distance == case.distance

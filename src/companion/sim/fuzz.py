@@ -13,13 +13,14 @@ docstring and in docs/safety.md.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from companion.params import PROFILES, Formation, Params, SensingParams
+from companion.params import PROFILES, Params, SensingParams
 from companion.sim.episode import TOLERANCE, start_in_slot
 from companion.sim.escape import escapable
 from companion.sim.runner import EpisodeSpec
@@ -113,7 +114,9 @@ def draw(seed: int, controller: str, sensing: str, base: Params | None = None,
     drawn = float(rng.uniform(*DISTANCE))
     bearing = float(rng.uniform(0.0, 2.0 * math.pi))
     distance = feasible_distance(drawn, bearing, base)
-    params = base.replace(formation=Formation(distance, bearing), sensing=profiles[sensing])
+    params = base.replace(formation=dataclasses.replace(base.formation, distance=distance,
+                                                        bearing=bearing),
+                          sensing=profiles[sensing])   # the base's formation policy stays
     heading = float(rng.uniform(-math.pi, math.pi))
     kind = START_KINDS[int(rng.integers(len(START_KINDS)))]
     start, velocity, room = _start(rng, kind, params)
