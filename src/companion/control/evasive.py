@@ -144,10 +144,12 @@ def give_way_target(robot: Pose, current: tuple[float, float], nominal: tuple[fl
     does not matter here: a robot that can move does not stand in a walker's way."""
     r, s, k = params.robot, params.supervisor, params.keepout
     horizon = k.evasive_horizon_s
+    if k.give_way_margin <= 0.0:
+        return None
     movers = [o for o in obstacles if isinstance(o, Circle) and o.moving
               and math.hypot(o.x - robot.x, o.y - robot.y) - o.radius - r.radius
               <= (r.v_max + math.hypot(o.vx, o.vy)) * horizon + k.give_way_margin]
-    if k.give_way_margin <= 0.0 or not movers:
+    if not movers:
         return None
     spec = Rollout(person.x, person.y, person.theta, 0.0, 0.0, 0.0, -math.inf, r.radius,
                    min(s.accel_max, s.decel_max), s.angular_accel_max, ROLLOUT_STEP,

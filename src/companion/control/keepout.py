@@ -268,16 +268,16 @@ def keep_out(target: tuple[float, float, float], robot: Pose, estimate: PersonEs
     grow = params.keepout.uncertainty_sigmas * reaction_std(estimate, reaction_delay(params))
     v = barrier_speed(v, robot, person, obstacles, params)
     threshold = params.keepout.collision_risk
+    spread = params.keepout.heading_sigmas * heading_std(estimate)
+    evade = None
     if closing(robot, person, v_now[0], params, grow) and (
             threshold <= 0.0 or risk_of((v, w), robot, v_now, estimate, params) >= threshold):
-        spread = params.keepout.heading_sigmas * heading_std(estimate)
         evade = evasive_target(robot, v_now, (v, w), person, obstacles, params, grow, spread,
                                horizon=params.keepout.evasive_horizon_s)
         if evade is not None:
             (v, w), u_ob = evade, 0.0
             reasons.append("evasive")
-    if "evasive" not in reasons:
-        spread = params.keepout.heading_sigmas * heading_std(estimate)
+    if evade is None:          # the evasive check's rollout already moved the walkers
         evade = give_way_target(robot, v_now, (v, w), person, obstacles, params, grow, spread)
         if evade is not None:
             (v, w), u_ob = evade, 0.0
