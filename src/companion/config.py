@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import difflib
+import functools
 import math
 import tomllib
 import types
@@ -209,7 +210,7 @@ def build(cls: type[T], mapping: Mapping[str, Any], prefix: str = "") -> T:
     Keys missing from ``mapping`` take their defaults. ``prefix`` is prepended to key names in
     error messages (for example ``"scenario.toml: params."``).
     """
-    hints = typing.get_type_hints(cls)
+    hints = _hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}
     reject_unknown(mapping, fields, prefix)
     kwargs: dict[str, Any] = {}
@@ -225,14 +226,23 @@ def build(cls: type[T], mapping: Mapping[str, Any], prefix: str = "") -> T:
         raise ConfigError(f"{prefix}{exc}") from None
 
 
+@functools.cache
+def _hints(cls: type) -> dict[str, Any]:
+    """``typing.get_type_hints(cls)``, once per class: it evaluates every annotation string,
+    and a config is validated whenever one is made (the adaptive formation makes one each
+    period while the bearing moves)."""
+    return typing.get_type_hints(cls)
+
+
 def validate(obj: Any, prefix: str = "") -> None:
     """Re-check every field of an already built config object (for objects made in Python)."""
-    hints = typing.get_type_hints(type(obj))
+    hints = _hints(type(obj))
     for f in dataclasses.fields(obj):
         value = getattr(obj, f.name)
         name = f"{prefix}{f.name}"
         if dataclasses.is_dataclass(value):
-            validate(value, prefix=f"{name}.")
+            if not isinstance(value, Validated):   # a Validated one checked itself when made
+                validate(value, prefix=f"{name}.")
             continue
         convert(list(value) if isinstance(value, tuple) else value, hints[f.name], name,
                 _allows_inf(f))
