@@ -87,3 +87,13 @@ def test_another_person_on_the_person_topic_is_given_way_to():
     assert max(estimates) < 0.1                  # the track stayed on the companion
     assert any("give_way" in r for r in reasons)
     assert gap > 0.0
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf])
+def test_a_walker_with_a_broken_velocity_is_dropped_and_reported(bad):
+    stack = make_controller("lqr", Params())
+    walker = Circle(2.0, 1.0, 0.25, vx=bad)
+    cmd = stack.step(Observation(0.0, Pose(-0.25, 1.0, 0.0), PersonState(0.0, 0.0, 0.0, 1.0, 0.0),
+                                 (walker,), None, (1.0, 0.0)))
+    assert math.isfinite(cmd.v) and math.isfinite(cmd.omega)
+    assert "obstacle_invalid" in cmd.reason.split("+")

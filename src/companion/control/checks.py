@@ -29,10 +29,11 @@ def pose_is_finite(pose: Pose) -> bool:
 
 
 def obstacle_is_finite(ob: Obstacle) -> bool:
-    """All fields finite (an unset ``influence`` is fine), a circle's radius >= 0."""
+    """All fields finite (an unset ``influence`` is fine; a circle's velocity too), a circle's
+    radius >= 0."""
     influence = () if ob.influence is None else (ob.influence,)
     if isinstance(ob, Circle):
-        return finite(ob.x, ob.y, ob.radius, *influence) and ob.radius >= 0.0
+        return finite(ob.x, ob.y, ob.radius, ob.vx, ob.vy, *influence) and ob.radius >= 0.0
     return finite(ob.x0, ob.y0, ob.x1, ob.y1, *influence)
 
 
