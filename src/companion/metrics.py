@@ -238,7 +238,6 @@ class Social:
         self._losses = self._refinds = self._chances = 0
         self._was_lost = False                    # the last sample of the blocks before
         self._lost_seen = 0                       # samples in view during that loss so far
-        self._chance_counted = False              # and whether it counted as a chance
 
     def add(self, log: Log) -> None:
         code, gap = log["walker_contact"], log["walker_gap_m"]
@@ -289,20 +288,15 @@ class Social:
         run = np.cumsum(start)                     # 0: the loss carried from before
         seen = np.bincount(run[lost & (log["person_in_view"] > 0.5)],
                            minlength=int(run[-1]) + 1 if len(run) else 1)
-        seen[0] += self._lost_seen if self._was_lost else 0
-        need = REFIND_VIEW_S / self._dt if self._dt else math.inf
-        chance = seen >= need - 1e-9
-        if self._was_lost and self._chance_counted:
-            chance[0] = False                      # counted in an earlier block
-        elif not self._was_lost:
-            chance[0] = False                      # no loss carried over
+        carried = self._lost_seen if self._was_lost else 0
+        seen[0] += carried
+        need = (REFIND_VIEW_S / self._dt if self._dt else math.inf) - 1e-9
+        chance = seen >= need
+        chance[0] &= self._was_lost and carried < need   # a carried loss counts once
         self._chances += int(np.count_nonzero(chance))
         if len(lost):
             self._was_lost = bool(lost[-1])
-            last = int(run[-1])
-            self._lost_seen = int(seen[last]) if self._was_lost else 0
-            self._chance_counted = self._was_lost and bool(
-                seen[last] >= need - 1e-9)
+            self._lost_seen = int(seen[int(run[-1])]) if self._was_lost else 0
         self._searching += int(np.count_nonzero(np.char.find(reason, "search_") >= 0))
         self._in_view += int(np.count_nonzero(log["person_in_view"] > 0.5))
         self._samples += len(reason)

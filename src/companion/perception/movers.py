@@ -82,16 +82,16 @@ class MovingTracker:
         return tuple(out)
 
     def circles(self, t: float) -> tuple[Circle, ...]:
-        """The confirmed tracks predicted to ``t`` (s) as circles with their velocities (a
-        standing one: velocity 0)."""
+        """The confirmed tracks predicted to ``t`` (s) at their reported velocities, as circles
+        with them (a standing one: where it was last seen, velocity 0)."""
         out = []
         for tr in self._tracks:
             if tr.hits < self.params.confirm or t - tr.t > self.params.forget_s:
                 continue
-            x, vx, y, vy = tr.kf.x
+            vx, vy = self._velocity(tr)       # a standing track is not moved by its noise
             dt = max(t - tr.t, 0.0)
-            mvx, mvy = self._velocity(tr)
-            out.append(Circle(float(x + vx * dt), float(y + vy * dt), tr.radius, None, mvx, mvy))
+            out.append(Circle(float(tr.kf.x[0] + vx * dt), float(tr.kf.x[2] + vy * dt),
+                              tr.radius, None, vx, vy))
         return tuple(out)
 
     # -- the pieces -------------------------------------------------------------------------

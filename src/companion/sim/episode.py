@@ -260,7 +260,8 @@ class Simulator:
         t = self.k * self.params.dt
         h = self.person.state(t)
         pose = Pose(self._x, self._y, self._th)
-        self._in_view = in_view(pose, h, self._blockers(), self.params.sensing)
+        world = self._blockers()
+        self._in_view = in_view(pose, h, world, self.params.sensing)
         arrived = (*self._handover, *self._sensor.detections(t, self._in_view)) \
             if self.detections else ()
         self._handover = ()
@@ -268,7 +269,6 @@ class Simulator:
             self._seen = (h.x, h.y)
         elif arrived:
             self._seen = (arrived[-1].x, arrived[-1].y)
-        world = self._blockers()
         known = self.perception.obstacles(self.k, pose, world, (h.x, h.y), self._seen,
                                           self._rng["lidar"])
         obs = Observation(t, pose, None if self.detections else h, known,
