@@ -2,10 +2,8 @@
 wire protocols (DDS through cyclonedds, Zenoh with sim-robot as the router), on loopback.
 
 In lock step (`sim-robot --lockstep`, the node on /clock) the two processes make the in-process
-run's decisions: over DDS the trajectory is the in-process one to 1e-8 m (measured 4e-9 m);
-Zenoh's Python callbacks run on one thread per subscription, so a period's /odom can reach the
-node after its /clock (as a ROS 2 executor orders topics its own way), the node then moves the
-previous odometry on by its velocity, and RMSE rho differs by about 0.2 to 0.7 mm.
+run's decisions: the trajectory is the in-process one to 1e-8 m over both transports (over
+Zenoh because the node's callbacks run in arrival order, `companion.ros.zenoh.in_order`).
 """
 
 from __future__ import annotations
@@ -134,14 +132,13 @@ def lockstep_run(tmp_path, ros_domain, transport: str, sensing: str, person_type
 @pytest.mark.parametrize("transport", ["dds", "zenoh"])
 def test_lockstep_ideal_matches_the_in_process_run(tmp_path, ros_domain, transport):
     """Ideal sensing, detections that carry the whole person state (nav_msgs/Odometry): RMSE
-    rho within 1 cm of `companion run figure8` (issue 22), and over DDS the same trajectory."""
+    rho within 1 cm of `companion run figure8` (issue 22), and the same trajectory."""
     log, m = lockstep_run(tmp_path, ros_domain, transport, "ideal", "odometry", 20.0)
     direct = in_process("ideal", 0, 20.0)
     ref = metrics.compute(direct)["rmse_rho_m"]
     assert abs(m["rmse_rho_m"] - ref) < 0.01, (m["rmse_rho_m"], ref)
-    if transport == "dds":   # over Zenoh a period's /odom may reach the node after its /clock
-        for column in ("robot_x", "robot_y", "robot_theta"):
-            np.testing.assert_allclose(log[column], direct[column], atol=1e-8)
+    for column in ("robot_x", "robot_y", "robot_theta"):
+        np.testing.assert_allclose(log[column], direct[column], atol=1e-8)
 
 
 @pytest.mark.parametrize("transport", ["dds", pytest.param("zenoh", marks=pytest.mark.slow)])

@@ -160,10 +160,10 @@ class ZenohTransport:
                                               max_samples=_depth(qos))
             recovery = zenoh.ext.RecoveryConfig(heartbeat=True) if qos.reliable else None
             sub = zenoh.ext.declare_advanced_subscriber(
-                self.session, key, on_sample, history=history, recovery=recovery,
+                self.session, key, in_order(on_sample), history=history, recovery=recovery,
                 subscriber_detection=True)
         else:
-            sub = self.session.declare_subscriber(key, on_sample)
+            sub = self.session.declare_subscriber(key, in_order(on_sample))
         self._keep(sub)
         self._declare_token(entity)
 
@@ -260,3 +260,11 @@ class ZenohTransport:
 def _depth(qos: Qos) -> int:
     """The depth rmw_zenoh uses: 0 (system default) becomes its default, 42."""
     return qos.depth or wire.DEFAULT_DEPTH
+
+
+def in_order(on_sample: Callable[[zenoh.Sample], None]) -> zenoh.handlers.Callback:
+    """``on_sample`` run on the Zenoh thread that receives the sample, not on a Python thread
+    of its subscription (eclipse-zenoh's default): samples from one peer then reach their
+    callbacks in the order they arrived, across topics, as a period's /odom and /person before
+    its /clock (a node in lock step ticks on that /clock). Callbacks must be short."""
+    return zenoh.handlers.Callback(on_sample, indirect=False)
