@@ -159,7 +159,7 @@ def test_fuzz_exits_on_its_criteria_only():
 
 def test_a_fuzz_episode_keeps_the_formation_policy_of_its_parameters():
     base = Params().replace(formation=dataclasses.replace(Params().formation,
-                                                          policy="adaptive"))
+                                                          policy="fixed"))
     case, spec = fuzz.draw(3, "lqr", "ideal", base)
-    assert spec.params.formation.policy == "adaptive"
+    assert spec.params.formation.policy == "fixed"
     assert spec.params.formation.distance == case.distance

@@ -39,6 +39,16 @@ def test_the_policy_takes_the_robots_side_at_first_and_after_a_turnaround_only()
                                                                walking) == BEHIND
 
 
+def test_a_side_set_while_running_is_taken_not_the_robots():
+    walking = PersonState(0.0, 0.0, 0.0, 1.0, 0.0)
+    policy = FormationPolicy(_params("adaptive", RIGHT), given=True)
+    assert policy.update(Pose(0.0, 1.0, 0.0), walking) == RIGHT         # the robot is left
+    back = dataclasses.replace(walking, theta=math.pi)                  # turned round: the
+    assert policy.update(Pose(0.0, 1.0, 0.0), back) == RIGHT            # robot's side again
+    assert FormationPolicy(_params("adaptive", RIGHT)).update(Pose(0.0, 1.0, 0.0),
+                                                              walking) == LEFT
+
+
 def _turnaround(policy: str):
     p = _params(policy)
     return run_one(EpisodeSpec("lqr", Crowd(SCENES["turnaround"], 0, dt=p.dt), p, 35.0)), p

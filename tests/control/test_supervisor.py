@@ -31,6 +31,8 @@ S = P.supervisor
 TR = P.tracker
 DT = P.dt
 EPS = 1e-9
+#: Without the search (the robot holds where the controlled stop left it): what fault 1 is.
+HOLD = P.replace(search=dataclasses.replace(P.search, max_time_s=0.0))
 
 
 def assert_within_limits(log, p=P):
@@ -101,7 +103,7 @@ def test_started_in_the_slot_it_is_ok_throughout():
 
 def test_fault1_person_lost_brakes_to_a_stop_and_holds():
     start, end = 5.0, 12.0
-    log = run([Fault("person_dropout", start, end)], duration=20.0)
+    log = run([Fault("person_dropout", start, end)], duration=20.0, p=HOLD)
     t, last = log["t"], start - DT          # the last detection
     coasting = (t >= start) & (t <= last + TR.coast_after_s - EPS)
     assert set(log["status"][coasting]) == {"ok"}                 # a short gap is normal
@@ -455,12 +457,20 @@ def test_fault7_scan_blackout_in_closed_loop_with_lidar():
 
 # -- fault 8: resume after an outage ---------------------------------------------------------
 
+VSM_CYCLE = pytest.mark.xfail(strict=True, reason="the search leaves the robot 2.4 m out, "
+                               "where the VSM falls into its limit cycle (docs/baselines.md)")
+
+
 @pytest.mark.parametrize("name", ["lqr", "pid", "vsm", "ic"])
-def test_fault8_resume_after_outage_without_a_jump(name):
-    log = run([Fault("person_dropout", 5.0, 8.0)], name=name, duration=25.0)
-    t = log["t"]
-    assert set(log["status"][(t > 5.6) & (t < 8.0)]) == {"stopped"}
-    resumed = np.flatnonzero((t >= 8.0) & (log["status"] != "stopped"))[0]
+@pytest.mark.parametrize("search", [True, False], ids=["search", "hold"])
+def test_fault8_resume_after_outage_without_a_jump(name, search, request):
+    if search and name == "vsm":
+        request.applymarker(VSM_CYCLE)
+    log = run([Fault("person_dropout", 5.0, 8.0)], name=name, duration=25.0,
+              p=P if search else HOLD)
+    t, lost = log["t"], rows(log, "person_lost")
+    assert np.all(lost[(t > 5.6) & (t < 8.0)])          # stopped, then searching
+    resumed = np.flatnonzero((t >= 8.0) & (log["status"] != "stopped") & ~lost)[0]
     assert t[resumed] <= 8.0 + TR.reacquire_time_s + 2 * DT
     assert_within_limits(log)                   # the ramp back up obeys the limits
     late = t > 22.0
@@ -474,7 +484,7 @@ def test_recorded_hole_is_an_outage_and_a_sparse_track_is_not(tmp_path):
     times = [i * 0.1 for i in range(50)] + [8.0 + i * 0.1 for i in range(150)]  # 3.1 s hole
     f.write_text("t,x,y\n" + "".join(f"{t:.2f},{t:.3f},0\n" for t in times))
     person = load_person_csv(f)
-    log = run_episode(make_controller("lqr", P), person, P, person.duration)
+    log = run_episode(make_controller("lqr", HOLD), person, HOLD, person.duration)
     hole = (log["t"] > 4.9 + TR.lost_after_s + EPS) & (log["t"] < 8.0)
     assert set(log["status"][hole]) == {"stopped"}
     assert np.all(rows(log, "person_lost")[hole])

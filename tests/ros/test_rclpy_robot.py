@@ -55,13 +55,14 @@ def robot_plan(spec, out: Path, stamped: bool = False, inject: dict | None = Non
             "out": str(out)}
 
 
-def node_params(folder: Path, stamped: bool) -> Path:
-    """The node's parameters: the scenario's formation and controller, sim time, people as
-    nav_msgs/Odometry (all of the ideal sensor's state)."""
+def node_params(folder: Path, stamped: bool, policy: str = "fixed") -> Path:
+    """The node's parameters: the scenario's formation (``policy`` the scenario's unless
+    given) and controller, sim time, people as nav_msgs/Odometry (all of the ideal sensor's
+    state)."""
     path = folder / "params.yaml"
     path.write_text(
         "companion:\n  ros__parameters:\n    controller: lqr\n"
-        "    formation: {bearing: right, distance: 1.0}\n"
+        f"    formation: {{bearing: right, distance: 1.0, policy: {policy}}}\n"
         f"    ros: {{use_sim_time: true, person_type: odometry, "
         f"cmd_vel_stamped: {str(stamped).lower()}}}\n")
     return path
@@ -186,15 +187,17 @@ def test_malformed_and_out_of_order_messages_get_a_named_reason(tmp_path, rclpy_
 def test_a_side_switch_set_by_the_robot_moves_it_to_the_other_side(tmp_path, rclpy_env,
                                                                    ros_domain):
     """The rclpy robot on the figure-8 in lock step with the node on --transport rclpy (so
-    that Fast DDS's parameter client gets its reply); at 10 s the robot sets
-    formation.bearing to left, as ``ros2 param set`` would: it is accepted, and the robot,
-    which started on the right, ends on the left, never nearer the person than the protective
-    distance, its velocities changing within the acceleration limits."""
+    that Fast DDS's parameter client gets its reply), the node with the default (adaptive)
+    formation policy; at 10 s the robot sets formation.bearing to left, as ``ros2 param set``
+    would: it is accepted, and the robot, which started on the right, ends on the left (the
+    side set, not the side it is on), never nearer the person than the protective distance,
+    its velocities changing within the acceleration limits."""
     _, spec, direct = figure8(30.0)
     plan = robot_plan(spec, tmp_path / "robot.json")
     plan["set_at"] = {"200": [["formation.bearing", "left"]]}
     log, alive, code, out = run_loop(tmp_path, rclpy_env, ros_domain, plan,
-                                     node_params(tmp_path, False), transport="rclpy")
+                                     node_params(tmp_path, False, "adaptive"),
+                                     transport="rclpy")
     assert log["phase"] == "done", (log["phase"], out)
     assert log["sets"] == [[200, "formation.bearing", [True, ""]]]
     steps = np.array([row[:6] for row in log["steps"]], dtype=float)

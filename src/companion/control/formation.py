@@ -6,7 +6,8 @@ the configured one, and fall in behind where side by side does not fit.
   turned by more than :data:`REVERSAL` from the heading at the last choice (a turnaround): a
   robot that was on the person's left is on their right once they walk back, and switching
   the formation's side keeps it where it is instead of running round the person. A gradual
-  turn (a circle) keeps the robot on its side, so it never switches there.
+  turn (a circle) keeps the robot on its side, so it never switches there. A side set while
+  running (``ros2 param set``, a retune) is the first choice instead, until the next turnaround.
 - **Narrow passage.** Where the room on that side of the person's way (the nearest obstacle
   the robot knows within :data:`AHEAD` m ahead of the person, measured sideways from the
   line of the person's heading) is less than the formation distance plus the robot's radius plus
@@ -85,10 +86,13 @@ def side_room(person: PersonState, side: float, obstacles: Sequence[Obstacle],
 class FormationPolicy:
     """Chooses the bearing in force from the configured one (module docstring)."""
 
-    def __init__(self, params: Params):
+    def __init__(self, params: Params, given: bool = False):
+        """``given``: the configured side is the first choice (a side the user just set),
+        not the side the robot is on."""
         self.configured = params.formation.bearing
         self.need = params.formation.distance + params.robot.radius + MARGIN
         self.step = BEARING_RATE * params.dt
+        self.given = given
         self.reset()
 
     def reset(self) -> None:
@@ -104,7 +108,9 @@ class FormationPolicy:
             return self.bearing
         turned = self._heading is not None and person.v > MOVING \
             and abs(wrap_pi(person.theta - self._heading)) > REVERSAL
-        if self._heading is None or turned:
+        if self._heading is None and self.given:
+            self._heading = person.theta
+        elif self._heading is None or turned:
             self._heading = person.theta
             self._side = LEFT if side_of(robot, person) > 0 else RIGHT
         room = side_room(person, 1.0 if self._side == LEFT else -1.0, obstacles)

@@ -214,8 +214,9 @@ class SafetySupervisor:
         ``inner`` made with them: the tracker, the clock and the last command stay, so the rate
         limits carry the robot from its last command towards the new slot; ``inner`` starts
         fresh at the next step. Parameters of the clock and tracker must not change."""
+        moved = params.formation.bearing != self._configured.formation.bearing
         self.inner, self.params, self._configured = inner, params, params
-        self._formation = FormationPolicy(params)
+        self._formation = FormationPolicy(params, given=moved)
         self._search.params = params
         self._odometry.robot = params.robot
         self._inner_fresh = True

@@ -20,7 +20,7 @@ from companion.sim import convergence
 from companion.sim.person import line
 from companion.sim.recorded import RecordedPerson, load_person_csv
 from companion.sim.runner import EpisodeSpec
-from companion.sim.scenario import builtin_path, load_scenario
+from companion.sim.scenario import builtin_path, deep_merge, load_scenario
 from companion.sim.sensing import OBSTACLE_SOURCES
 
 KEYS = ("scenarios", "tracks", "data", "every", "offset", "min_mean_speed", "min_duration",
@@ -140,7 +140,7 @@ def _convergence(data: Any, where: str) -> list[Motion]:
         seen.setdefault((case.speed, case.start), []).append(case.side)
     for (speed, start), sides in seen.items():
         def base(label: str, over: dict) -> Params:
-            return params_from_mapping(over)
+            return params_from_mapping(deep_merge(convergence.PAPER, over))
 
         def build(label: str, over: dict, controller: str, speed=speed, start=start
                   ) -> EpisodeSpec:

@@ -73,11 +73,11 @@ class Formation(Validated):
                            "desired bearing alpha_d of R from the person's heading, in [0, 2*pi): "
                            "left pi/2, behind pi, right 3*pi/2, front 0. TOML also accepts "
                            "\"left\", \"right\", \"behind\", \"front\"", _bearing)
-    policy: str = param("fixed", "-", "'fixed': the bearing as given (the paper's); "
-                        "'adaptive': beside the person (left or right), the robot takes the "
-                        "side it is on when it first sees the person and when the person "
-                        "turns round, instead of crossing over, and falls in behind where "
-                        "side by side does not fit (companion.control.formation)",
+    policy: str = param("adaptive", "-", "'adaptive': beside the person (left or right), the "
+                        "robot takes the side it is on when it first sees the person and when "
+                        "the person turns round, instead of crossing over, and falls in behind "
+                        "where side by side does not fit (companion.control.formation); "
+                        "'fixed': the bearing as given (the paper's, which its scenarios pin)",
                         choices=("fixed", "adaptive"))
 
 
@@ -202,7 +202,7 @@ class SearchParams(Validated):
     """Looking for a lost person after the controlled stop (:mod:`companion.control.search`,
     docs/safety.md "Losing and finding the person")."""
 
-    max_time_s: float = param(0.0, "s", "how long the robot searches once it has stopped for "
+    max_time_s: float = param(10.0, "s", "how long the robot searches once it has stopped for "
                               "a lost person; 0: it holds where it stopped (no search)",
                               non_negative)
     max_distance_m: float = param(3.0, "m", "how far from where it stopped it may go while "

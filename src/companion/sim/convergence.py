@@ -21,6 +21,8 @@ PERSON_START = (3.0, 3.0, 0.0)
 STARTS = ((3.0, 6.0), (0.0, 5.0), (0.0, 3.0), (0.0, 1.0), (3.0, 0.0))
 HEADINGS = (0.0, 0.5 * math.pi, -0.5 * math.pi, math.pi)
 SPEEDS = (0.5, 1.0)
+#: The paper's formation: its fixed bearing, on the side the robot starts on.
+PAPER = {"formation": {"policy": "fixed"}}
 
 
 @dataclass(frozen=True)
@@ -49,8 +51,8 @@ def episode(case: Case, controller: str, params: Params, duration: float = 30.0
             ) -> EpisodeSpec:
     """The runner's episode of one case."""
     bearing = LEFT if case.side == "left" else RIGHT
-    p = dataclasses.replace(params, formation=dataclasses.replace(params.formation,
-                                                                  bearing=bearing))
+    p = dataclasses.replace(params, formation=dataclasses.replace(
+        params.formation, bearing=bearing, policy=PAPER["formation"]["policy"]))
     return EpisodeSpec(controller, line(PERSON_START, case.speed), p, duration,
                        start=case.start)
 
