@@ -6,6 +6,7 @@ field says otherwise.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -89,7 +90,9 @@ class PersonEstimate:
 class Circle:
     """A circular obstacle; ``influence`` (m) overrides the avoidance range r / K_ob if set.
     ``vx``, ``vy`` (m/s, world frame): its velocity, for a walker or a moving LiDAR cluster
-    (0: standing or unknown); the keep-out and avoidance predict it at constant velocity."""
+    (0: standing or unknown); the keep-out and avoidance predict it at constant velocity.
+    ``piece``: one of the circles the LiDAR split a larger thing (a wall) into, which bounds
+    the way (nothing is known beyond it)."""
 
     x: float
     y: float
@@ -97,6 +100,7 @@ class Circle:
     influence: float | None = None
     vx: float = 0.0
     vy: float = 0.0
+    piece: bool = False
 
     @property
     def moving(self) -> bool:
@@ -104,8 +108,7 @@ class Circle:
 
     def at(self, dt: float) -> Circle:
         """Where it is ``dt`` s on at its velocity."""
-        return Circle(self.x + self.vx * dt, self.y + self.vy * dt, self.radius, self.influence,
-                      self.vx, self.vy)
+        return dataclasses.replace(self, x=self.x + self.vx * dt, y=self.y + self.vy * dt)
 
 
 @dataclass(frozen=True)

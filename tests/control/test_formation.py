@@ -95,8 +95,26 @@ def test_side_room_sees_a_door_ahead_and_a_wall_beside():
     assert side_room(dataclasses.replace(walking, x=10.0), 1.0, door) == math.inf  # 5 m away
     assert side_room(walking, 1.0, (Wall(10.0, 1.5, 20.0, 1.5),)) == pytest.approx(1.5)
     assert side_room(walking, 1.0, (Wall(14.0, -1.0, 14.0, 1.0),)) == 0.0   # across the way
-    assert side_room(walking, 1.0, (Circle(13.0, 1.2, 0.3),)) == pytest.approx(0.9)
-    assert side_room(walking, -1.0, (Circle(13.0, 1.2, 0.3),)) == math.inf
+    pillar = Circle(13.0, 1.2, 0.3)                   # sideways from 0.9 to 1.5 m
+    assert side_room(walking, -1.0, (pillar,)) == math.inf
+    assert side_room(walking, 1.0, (pillar,), lane=1.1) == math.inf     # passed beyond
+    near = Wall(10.0, 2.0, 20.0, 2.0)                 # 0.5 m beyond it: too little
+    assert side_room(walking, 1.0, (pillar, near), lane=1.1) == pytest.approx(0.9)
+    far = Wall(10.0, 3.0, 20.0, 3.0)                  # 1.5 m beyond it: the robot passes
+    assert side_room(walking, 1.0, (pillar, far), lane=1.1) == pytest.approx(3.0)
+    piece = dataclasses.replace(pillar, piece=True)   # a piece of a wall the LiDAR saw
+    assert side_room(walking, 1.0, (piece,), lane=1.1) == pytest.approx(0.9)
+
+
+def test_in_the_corridor_the_adaptive_robot_passes_the_pillars_beside_the_person():
+    """The corridor's pillars leave room on their far side: the robot stays beside, as with
+    the fixed bearing."""
+    runs = {}
+    for policy in ("fixed", "adaptive"):
+        sc = load_scenario("corridor", {"formation": {"policy": policy}})
+        runs[policy] = run_one(sc.episode("lqr"))
+    assert np.all(runs["adaptive"]["alpha_d"] == LEFT)
+    np.testing.assert_allclose(runs["adaptive"]["robot_y"], runs["fixed"]["robot_y"])
 
 
 def test_through_a_door_the_adaptive_robot_falls_in_behind_and_returns_to_the_side():

@@ -9,10 +9,10 @@ the configured one, and fall in behind where side by side does not fit.
   turn (a circle) keeps the robot on its side, so it never switches there. A side set while
   running (``ros2 param set``, a retune) is the first choice instead, until the next turnaround.
 - **Narrow passage.** Where the room on that side of the person's way (the nearest obstacle
-  the robot knows within :data:`AHEAD` m ahead of the person, measured sideways from the
-  line of the person's heading) is less than the formation distance plus the robot's radius plus
-  :data:`MARGIN`, the robot falls in behind; it returns to the side once the room is
-  :data:`HYSTERESIS` more than that.
+  the robot knows within :data:`AHEAD` m ahead of the person that it cannot pass on its far
+  side, measured sideways from the line of the person's heading) is less than the formation
+  distance plus the robot's radius plus :data:`MARGIN`, the robot falls in behind; it
+  returns to the side once the room is :data:`HYSTERESIS` more than that.
 - The bearing in force moves towards the chosen one at most :data:`BEARING_RATE`, so the slot
   never jumps. Only formations beside the person adapt; behind and front stay.
 """
@@ -47,26 +47,28 @@ def side_of(robot: Pose, person: PersonState) -> float:
 
 
 def side_room(person: PersonState, side: float, obstacles: Sequence[Obstacle],
-              ahead: float = AHEAD) -> float:
-    """Room (m) on ``side`` (+1 left, -1 right) of the person's way: the smallest sideways
-    distance from the line of the person's heading to a standing obstacle lying within
-    ``ahead`` m ahead of the person (0 where one crosses the line there); inf if none. Moving
-    circles (walkers) do not narrow the way: they pass, and avoidance and the keep-out see
-    them."""
+              ahead: float = AHEAD, lane: float = 0.0) -> float:
+    """Room (m) on ``side`` (+1 left, -1 right) of the person's way: the sideways distance
+    from the line of the person's heading to the nearest standing obstacle within ``ahead`` m
+    ahead of the person that the robot cannot pass on its far side (0 where one crosses the
+    line there); inf if none. A wall, or a piece of one (a LiDAR circle marked ``piece``),
+    bounds the way; another circle does only where less than ``lane`` m is free beyond it
+    before the next obstacle (a pillar in a wide corridor does not). Moving circles (walkers) do not
+    narrow the way: they pass, and avoidance and the keep-out see them."""
     c, s = math.cos(person.theta), math.sin(person.theta)
 
     def frame(x: float, y: float) -> tuple[float, float]:    # (along, sideways on ``side``)
         dx, dy = x - person.x, y - person.y
         return dx * c + dy * s, side * (-dx * s + dy * c)
 
-    room = math.inf
+    spans: list[tuple[float, float, bool]] = []      # (from, to, bounds the way) sideways
     for ob in obstacles:
         if isinstance(ob, Circle):
             if ob.moving:
                 continue
             along, lat = frame(ob.x, ob.y)
-            if -ob.radius <= along <= ahead + ob.radius:
-                room = min(room, max(lat - ob.radius, 0.0) if lat > -ob.radius else math.inf)
+            if -ob.radius <= along <= ahead + ob.radius and lat > -ob.radius:
+                spans.append((max(lat - ob.radius, 0.0), lat + ob.radius, ob.piece))
         elif isinstance(ob, Wall):
             (a0, l0), (a1, l1) = frame(ob.x0, ob.y0), frame(ob.x1, ob.y1)
             lo, hi = max(min(a0, a1), 0.0), min(max(a0, a1), ahead)
@@ -77,10 +79,21 @@ def side_room(person: PersonState, side: float, obstacles: Sequence[Obstacle],
             else:
                 lats = tuple(l0 + (l1 - l0) * (a - a0) / (a1 - a0) for a in (lo, hi))
             if min(lats) <= 0.0 <= max(lats):
-                room = 0.0                   # it crosses the way
+                spans.append((0.0, math.inf, True))          # it crosses the way
             elif min(lats) > 0.0:
-                room = min(room, min(lats))
-    return room
+                spans.append((min(lats), math.inf, True))
+    merged: list[list] = []                          # overlapping spans as one
+    for start, end, bounds in sorted(spans):
+        if merged and start <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], end)
+            merged[-1][2] = merged[-1][2] or bounds
+        else:
+            merged.append([start, end, bounds])
+    for i, (start, end, bounds) in enumerate(merged):
+        beyond = merged[i + 1][0] if i + 1 < len(merged) else math.inf
+        if bounds or beyond - end < lane:
+            return start
+    return math.inf
 
 
 class FormationPolicy:
@@ -91,6 +104,7 @@ class FormationPolicy:
         not the side the robot is on."""
         self.configured = params.formation.bearing
         self.need = params.formation.distance + params.robot.radius + MARGIN
+        self.lane = 2.0 * (params.robot.radius + MARGIN)   # to pass an obstacle's far side
         self.step = BEARING_RATE * params.dt
         self.given = given
         self.reset()
@@ -113,7 +127,8 @@ class FormationPolicy:
         elif self._heading is None or turned:
             self._heading = person.theta
             self._side = LEFT if side_of(robot, person) > 0 else RIGHT
-        room = side_room(person, 1.0 if self._side == LEFT else -1.0, obstacles)
+        room = side_room(person, 1.0 if self._side == LEFT else -1.0, obstacles,
+                         lane=self.lane)
         if room < self.need:
             self._behind = True
         elif room > self.need + HYSTERESIS:

@@ -217,8 +217,9 @@ def extract_obstacles(scan: Scan, person: tuple[float, float] | None,
     list of Circle
         In beam order of their clusters. Each circle contains every return it was fitted to
         (see the module docstring for the guarantees). Circles that stand for a piece of a
-        split cluster (a wall, a large object) carry ``influence = piece_influence``: their
-        radius says nothing about the object's size, so r / K_ob would be meaningless.
+        split cluster (a wall, a large object) are marked ``piece`` and carry ``influence =
+        piece_influence``: their radius says nothing about the object's size, so r / K_ob
+        would be meaningless.
     """
     checked = checked_scan(scan)
     if checked is None:
@@ -244,7 +245,8 @@ def extract_obstacles(scan: Scan, person: tuple[float, float] | None,
         out += [(i, c, r, params.piece_influence)
                 for i, c, r in zip(owner, centres.tolist(), radii.tolist())]
     out.sort(key=lambda item: item[0])             # stable: pieces stay in beam order
-    circles = [Circle(c[0], c[1], r, influence) for _, c, r, influence in out]
+    circles = [Circle(c[0], c[1], r, influence, piece=influence is not None)
+               for _, c, r, influence in out]
     if person is not None:
         keep_out = params.person_radius + params.person_exclusion
         circles = [c for c in circles if math.hypot(c.x - person[0], c.y - person[1]) > keep_out]

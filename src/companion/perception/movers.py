@@ -12,6 +12,7 @@ speed is at least ``min_speed`` and more than 3 standard deviations from 0, else
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -75,7 +76,7 @@ class MovingTracker:
             used.add(j)
             vx, vy = self._velocity(tr)
             if vx or vy:
-                out[i] = Circle(c.x, c.y, c.radius, c.influence, vx, vy)
+                out[i] = dataclasses.replace(c, vx=vx, vy=vy)
         for j, i in enumerate(index):
             if j not in used:
                 self._tracks.append(self._start(circles[i], t))
