@@ -39,6 +39,22 @@ def test_the_policy_takes_the_robots_side_at_first_and_after_a_turnaround_only()
                                                                walking) == BEHIND
 
 
+def test_a_person_first_seen_standing_who_sets_off_keeps_the_side():
+    """A heading seen while the person stands is no reference: setting off in any direction
+    is not a turnaround (a switch then, with the robot beside a person who starts walking,
+    led to a contact beside a recorded walker, students003/219)."""
+    policy = FormationPolicy(_params("adaptive", RIGHT))
+    robot = Pose(0.5, 1.0, 0.0)
+    standing = PersonState(0.0, 0.0, 2.0, 0.1, 0.0)
+    assert side_of(robot, standing) == -1.0
+    assert policy.update(robot, standing) == RIGHT
+    off = PersonState(0.0, 0.0, -0.2, 0.8, 0.0)
+    assert side_of(robot, off) == 1.0                                    # now on its left
+    assert policy.update(robot, off) == RIGHT
+    back = dataclasses.replace(off, theta=math.pi - 0.2)                 # a walking turnaround
+    assert policy.update(Pose(0.5, -1.0, 0.0), back) == LEFT             # the robot's side
+
+
 def test_a_side_set_while_running_is_taken_not_the_robots():
     walking = PersonState(0.0, 0.0, 0.0, 1.0, 0.0)
     policy = FormationPolicy(_params("adaptive", RIGHT), given=True)

@@ -2,8 +2,10 @@
 "Formations"): beside the person, take the side the robot is on instead of crossing over to
 the configured one, and fall in behind where side by side does not fit.
 
-- **Side.** Chosen when the person is first seen and again whenever the person's heading has
-  turned by more than :data:`REVERSAL` from the heading at the last choice (a turnaround): a
+- **Side.** Chosen when the person is first seen and again whenever the person's walking
+  heading has turned by more than :data:`REVERSAL` from the one at the last choice (a
+  turnaround; a person first seen standing who sets off keeps the side, as does one who
+  stands and turns on the spot until they walk off): a
   robot that was on the person's left is on their right once they walk back, and switching
   the formation's side keeps it where it is instead of running round the person. A gradual
   turn (a circle) keeps the robot on its side, so it never switches there. A side set while
@@ -113,18 +115,22 @@ class FormationPolicy:
         self.bearing = self.configured
         self._side = self.configured
         self._behind = False
-        self._heading: float | None = None       # the person's heading at the last choice
+        self._heading: float | None = None       # the walking heading at the last choice
+        self._seen = False
 
     def update(self, robot: Pose, person: PersonState,
                obstacles: Sequence[Obstacle] = ()) -> float:
         """The bearing in force after this estimate of the person."""
         if not _beside(self.configured):
             return self.bearing
-        turned = self._heading is not None and person.v > MOVING \
-            and abs(wrap_pi(person.theta - self._heading)) > REVERSAL
-        if self._heading is None and self.given:
-            self._heading = person.theta
-        elif self._heading is None or turned:
+        walking = person.v > MOVING
+        if self._heading is None:                # not yet seen walking
+            if not self._seen and not self.given:
+                self._side = LEFT if side_of(robot, person) > 0 else RIGHT
+            self._seen = True
+            if walking:                          # setting off keeps the side
+                self._heading = person.theta
+        elif walking and abs(wrap_pi(person.theta - self._heading)) > REVERSAL:
             self._heading = person.theta
             self._side = LEFT if side_of(robot, person) > 0 else RIGHT
         room = side_room(person, 1.0 if self._side == LEFT else -1.0, obstacles,
