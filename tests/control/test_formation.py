@@ -120,6 +120,7 @@ def test_side_room_sees_a_door_ahead_and_a_wall_beside():
     assert side_room(walking, 1.0, (pillar, far), lane=1.1) == pytest.approx(3.0)
     piece = dataclasses.replace(pillar, piece=True)   # a piece of a wall the LiDAR saw
     assert side_room(walking, 1.0, (piece,), lane=1.1) == pytest.approx(0.9)
+    assert side_room(walking, 1.0, (pillar, far)) == pytest.approx(0.9)    # no lane: any
 
 
 def test_in_the_corridor_the_adaptive_robot_passes_the_pillars_beside_the_person():

@@ -12,7 +12,8 @@ the configured one, and fall in behind where side by side does not fit.
   running (``ros2 param set``, a retune) is the first choice instead, until the next turnaround.
 - **Narrow passage.** Where the room on that side of the person's way (the nearest obstacle
   the robot knows within :data:`AHEAD` m ahead of the person that it cannot pass on its far
-  side, measured sideways from the line of the person's heading) is less than the formation
+  side while the person walks, any obstacle while they stand, measured sideways from the
+  line of the person's heading) is less than the formation
   distance plus the robot's radius plus :data:`MARGIN`, the robot falls in behind; it
   returns to the side once the room is :data:`HYSTERESIS` more than that.
 - The bearing in force moves towards the chosen one at most :data:`BEARING_RATE`, so the slot
@@ -49,13 +50,14 @@ def side_of(robot: Pose, person: PersonState) -> float:
 
 
 def side_room(person: PersonState, side: float, obstacles: Sequence[Obstacle],
-              ahead: float = AHEAD, lane: float = 0.0) -> float:
+              ahead: float = AHEAD, lane: float | None = None) -> float:
     """Room (m) on ``side`` (+1 left, -1 right) of the person's way: the sideways distance
     from the line of the person's heading to the nearest standing obstacle within ``ahead`` m
     ahead of the person that the robot cannot pass on its far side (0 where one crosses the
     line there); inf if none. A wall, or a piece of one (a LiDAR circle marked ``piece``),
-    bounds the way; another circle does only where less than ``lane`` m is free beyond it
-    before the next obstacle (a pillar in a wide corridor does not). Moving circles (walkers) do not
+    bounds the way; with a ``lane`` (m) another circle does only where less than that is
+    free beyond it before the next obstacle (a pillar in a wide corridor does not), without
+    one every circle does. Moving circles (walkers) do not
     narrow the way: they pass, and avoidance and the keep-out see them."""
     c, s = math.cos(person.theta), math.sin(person.theta)
 
@@ -93,7 +95,7 @@ def side_room(person: PersonState, side: float, obstacles: Sequence[Obstacle],
             merged.append([start, end, bounds])
     for i, (start, end, bounds) in enumerate(merged):
         beyond = merged[i + 1][0] if i + 1 < len(merged) else math.inf
-        if bounds or beyond - end < lane:
+        if bounds or lane is None or beyond - end < lane:
             return start
     return math.inf
 
@@ -107,6 +109,7 @@ class FormationPolicy:
         self.configured = params.formation.bearing
         self.need = params.formation.distance + params.robot.radius + MARGIN
         self.lane = 2.0 * (params.robot.radius + MARGIN)   # to pass an obstacle's far side
+        # (while the person walks: beside a standing person the slot itself must be free)
         self.step = BEARING_RATE * params.dt
         self.given = given
         self.reset()
@@ -134,7 +137,7 @@ class FormationPolicy:
             self._heading = person.theta
             self._side = LEFT if side_of(robot, person) > 0 else RIGHT
         room = side_room(person, 1.0 if self._side == LEFT else -1.0, obstacles,
-                         lane=self.lane)
+                         lane=self.lane if walking else None)
         if room < self.need:
             self._behind = True
         elif room > self.need + HYSTERESIS:
