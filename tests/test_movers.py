@@ -24,7 +24,7 @@ def test_a_walker_gets_its_velocity_and_a_standing_cluster_none():
         t = 0.1 * k
         walker = Circle(1.0 + 1.2 * t + rng.normal(0, 0.04), 2.0 + rng.normal(0, 0.04), 0.25)
         post = Circle(5.0 + rng.normal(0, 0.04), -1.0 + rng.normal(0, 0.04), 0.2)
-        wall = Circle(0.0, -3.0, 0.3, influence=0.5)     # a piece of a wall
+        wall = Circle(0.0, -3.0, 0.3, influence=0.5, piece=True)   # a piece of a wall
         out = tracker.update([walker, post, wall], t)
         assert out[2] == wall                            # passed through untouched
         if k >= 10:

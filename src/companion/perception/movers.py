@@ -52,7 +52,7 @@ class MovingTracker:
     def update(self, circles: Sequence[Circle], t: float) -> tuple[Circle, ...]:
         """Take the circles seen at time ``t`` (s); return them in order, those that belong to
         a confirmed moving track with its velocity. Circles too large to be a person, pieces of
-        walls (``influence`` set) and a repeated time are passed through; a time before the
+        walls (``piece``) and a repeated time are passed through; a time before the
         last starts over."""
         p = self.params
         if self._t is not None and t <= self._t:
@@ -61,7 +61,7 @@ class MovingTracker:
             self.reset()                  # the clock went back (a replay restarted)
         self._t = t
         index = [i for i, c in enumerate(circles)
-                 if c.influence is None and c.radius <= p.max_radius]
+                 if not c.piece and c.radius <= p.max_radius]
         self._tracks = [tr for tr in self._tracks if t - tr.t <= p.forget_s]
         for tr in self._tracks:
             self._predict(tr.kf, t - tr.t)
