@@ -154,6 +154,28 @@ def line_of_sight(ax: float, ay: float, bx: float, by: float,
     return True
 
 
+def sweep_clear(ax: float, ay: float, bx: float, by: float, obstacles: Sequence[Obstacle],
+                footprint: float) -> bool:
+    """True if a footprint of radius ``footprint`` moved straight from ``(ax, ay)`` to
+    ``(bx, by)`` overlaps no obstacle on the way, or, for an obstacle it already overlaps at
+    ``(ax, ay)``, gets no closer to it than there."""
+    for o in obstacles:
+        if isinstance(o, Circle):
+            px, py = segment_point(o.x, o.y, ax, ay, bx, by)
+            need = min(o.radius + footprint, math.hypot(ax - o.x, ay - o.y))
+            if math.hypot(px - o.x, py - o.y) < need - 1e-9:
+                return False
+            continue
+        if _crosses(ax, ay, bx, by, o.x0, o.y0, o.x1, o.y1):
+            return False
+        need = min(footprint, wall_clearance(ax, ay, o.x0, o.y0, o.x1, o.y1))
+        if min(wall_clearance(bx, by, o.x0, o.y0, o.x1, o.y1),
+               wall_clearance(o.x0, o.y0, ax, ay, bx, by),
+               wall_clearance(o.x1, o.y1, ax, ay, bx, by)) < need - 1e-9:
+            return False
+    return True
+
+
 def _crosses(ax: float, ay: float, bx: float, by: float, cx: float, cy: float, dx: float,
              dy: float) -> bool:
     """Whether segments ab and cd cross properly (each one's ends on both sides of the

@@ -151,3 +151,27 @@ def test_through_a_door_the_adaptive_robot_falls_in_behind_and_returns_to_the_si
     assert a["path_length_m"] > 30.0 > f["path_length_m"]       # through, not stuck
     assert a["obstacle_collisions"] == 0 and a["min_person_distance_m"] >= 0.5
     assert adaptive["slot_error_m"][-1] < 0.2 < fixed["slot_error_m"][-1]
+
+
+DOOR = (Wall(15.0, -6.0, 15.0, -0.8), Wall(15.0, 0.8, 15.0, 6.0))
+
+
+@pytest.mark.parametrize("policy", ["fixed", "adaptive"])
+def test_a_robot_held_up_before_the_door_gets_through_round_the_wall(policy):
+    """The person is through the door (2 m on, walking); the robot stands before the wall on
+    the left of the opening, its slot straight beyond the wall. The adaptive robot goes
+    round the door's edge (``rejoin``), through the opening, and ends in its slot; the fixed
+    bearing's slot holds it against the wall."""
+    p = _params(policy)
+    log = run_one(EpisodeSpec("lqr", line((17.0, 0.0, 0.0), 0.8), p, 25.0,
+                              start=Pose(14.4, 1.6, 0.0), obstacles=DOOR))
+    m = metrics.compute(log)
+    assert m["obstacle_collisions"] == 0 and m["min_person_distance_m"] >= 0.5
+    through = log["robot_x"][-1] > 16.0
+    if policy == "fixed":
+        assert not through and not any("rejoin" in r for r in log["reason"])
+        return
+    assert through and any("rejoin" in r for r in log["reason"])
+    k = int(np.argmax(log["robot_x"] > 15.0))                    # through the opening
+    assert abs(log["robot_y"][k]) < 0.8 - p.robot.radius
+    assert log["slot_error_m"][-1] < 0.3 and log["alpha_d"][-1] == pytest.approx(LEFT)

@@ -15,7 +15,9 @@ the configured one, and fall in behind where side by side does not fit.
   side while the person walks, any obstacle while they stand, measured sideways from the
   line of the person's heading) is less than the formation
   distance plus the robot's radius plus :data:`MARGIN`, the robot falls in behind; it
-  returns to the side once the room is :data:`HYSTERESIS` more than that.
+  returns to the side once the room is :data:`HYSTERESIS` more than that and it can move
+  straight to its side slot past every wall (a robot still before a door that the person
+  is through stays behind them until it is through too).
 - The bearing in force moves towards the chosen one at most :data:`BEARING_RATE`, so the slot
   never jumps. Only formations beside the person adapt; behind and front stay.
 """
@@ -25,7 +27,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from companion.geometry import wrap_2pi, wrap_pi
+from companion.geometry import sweep_clear, wrap_2pi, wrap_pi
 from companion.params import BEHIND, LEFT, RIGHT, Params
 from companion.types import Circle, Obstacle, PersonState, Pose, Wall
 
@@ -107,7 +109,8 @@ class FormationPolicy:
         """``given``: the configured side is the first choice (a side the user just set),
         not the side the robot is on."""
         self.configured = params.formation.bearing
-        self.need = params.formation.distance + params.robot.radius + MARGIN
+        self.distance, self.radius = params.formation.distance, params.robot.radius
+        self.need = self.distance + self.radius + MARGIN
         self.lane = 2.0 * (params.robot.radius + MARGIN)   # to pass an obstacle's far side
         # (while the person walks: beside a standing person the slot itself must be free)
         self.step = BEARING_RATE * params.dt
@@ -140,7 +143,8 @@ class FormationPolicy:
                          lane=self.lane if walking else None)
         if room < self.need:
             self._behind = True
-        elif room > self.need + HYSTERESIS:
+        elif room > self.need + HYSTERESIS and (not self._behind
+                                                or self._reachable(robot, person, obstacles)):
             self._behind = False
         target = BEHIND if self._behind else self._side
         change = wrap_pi(target - self.bearing)
@@ -149,6 +153,19 @@ class FormationPolicy:
         else:
             self.bearing = wrap_2pi(self.bearing + max(-self.step, min(self.step, change)))
         return self.bearing
+
+    def _reachable(self, robot: Pose, person: PersonState,
+                   obstacles: Sequence[Obstacle]) -> bool:
+        """The robot's footprint can move straight to its slot on the chosen side without
+        meeting a wall or a LiDAR wall piece."""
+        a = person.theta + self._side
+        sx, sy = person.x + self.distance * math.cos(a), person.y + self.distance * math.sin(a)
+        return sweep_clear(robot.x, robot.y, sx, sy, walls_of(obstacles), self.radius)
+
+
+def walls_of(obstacles: Sequence[Obstacle]) -> list[Obstacle]:
+    """The obstacles that bound the way: walls and LiDAR wall pieces."""
+    return [o for o in obstacles if isinstance(o, Wall) or o.piece]
 
 
 def _beside(bearing: float) -> bool:

@@ -8,7 +8,8 @@ the status reason:
    walked on at its velocity for ``search.horizon_s``);
 2. ``search_approach``: move there at up to ``search.speed``, never faster than the braking
    bound of every obstacle it sees (it can always stop short of them), until within
-   ``search.arrive_m``;
+   ``search.arrive_m``; where walls stand in the straight way, round them
+   (:func:`companion.control.planner.next_point`);
 3. ``search_scan``: turn on the spot.
 
 The search ends after ``search.max_time_s`` or once the robot is ``search.max_distance_m``
@@ -20,7 +21,9 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+from companion.control.formation import walls_of
 from companion.control.keepout import clip_to, obstacle_bounds
+from companion.control.planner import next_point
 from companion.geometry import wrap_pi
 from companion.params import Params
 from companion.types import Obstacle, PersonEstimate, Pose
@@ -72,14 +75,27 @@ class Search:
                                                      robot.y - self._from[1]) > s.max_distance_m:
             self.over = True
             return None
-        gx, gy = self._goal
-        dist = math.hypot(gx - robot.x, gy - robot.y)
-        error = wrap_pi(math.atan2(gy - robot.y, gx - robot.x) - robot.theta)
-        turn = max(-s.turn_rate, min(s.turn_rate, TURN_GAIN * error))
-        if dist <= s.arrive_m:
+        if math.hypot(self._goal[0] - robot.x, self._goal[1] - robot.y) <= s.arrive_m:
             return 0.0, self._scan * s.turn_rate, "search_scan"
-        if abs(error) > FACING:
-            return 0.0, turn, "search_turn"
-        v = clip_to(min(s.speed, p.robot.v_max) * math.cos(error),
-                    obstacle_bounds(robot, obstacles, p, v_now), p.robot.v_max)
-        return v, turn, "search_approach"
+        walls = walls_of(obstacles)
+        point = next_point((robot.x, robot.y), self._goal, walls,
+                           p.robot.radius + p.keepout.obstacle_clearance) if walls else None
+        v, omega, facing = drive_to(point or self._goal, robot, obstacles, v_now, p, s.speed)
+        return v, omega, "search_approach" if facing else "search_turn"
+
+
+def drive_to(goal: tuple[float, float], robot: Pose, obstacles: Sequence[Obstacle],
+             v_now: float, params: Params, speed: float, turn_rate: float | None = None
+             ) -> tuple[float, float, bool]:
+    """``(v, omega, facing)`` towards ``goal``: turn on the spot (at up to ``turn_rate``,
+    default ``search.turn_rate``) until facing it within :data:`FACING`, then drive at up to
+    ``speed``, never faster than the braking bound of every obstacle seen."""
+    rate = params.search.turn_rate if turn_rate is None else turn_rate
+    gx, gy = goal
+    error = wrap_pi(math.atan2(gy - robot.y, gx - robot.x) - robot.theta)
+    turn = max(-rate, min(rate, TURN_GAIN * error))
+    if abs(error) > FACING:
+        return 0.0, turn, False
+    v = clip_to(min(speed, params.robot.v_max) * math.cos(error),
+                obstacle_bounds(robot, obstacles, params, v_now), params.robot.v_max)
+    return v, turn, True

@@ -38,6 +38,7 @@ from companion.control.delays import DelayMeter
 from companion.control.formation import FormationPolicy
 from companion.control.keepout import keep_out
 from companion.control.limits import limit
+from companion.control.rejoin import Rejoin
 from companion.control.search import Search
 from companion.control.slot import reference_point, slot_point
 from companion.geometry import unicycle_step, wrap_pi
@@ -76,13 +77,15 @@ class SafetySupervisor:
         self._others = MovingTracker(params.movers)   # the other people detected
         self.delays = DelayMeter(params)
         self._search = Search(params)
+        self._rejoin = Rejoin(params)
         self.reset()
 
     def reset(self) -> None:
         if self.params is not self._configured and self._rebuild is not None:
             self.inner, self.params = self._rebuild(self._configured), self._configured
-            self._search.params = self.params
+            self._search.params = self._rejoin.params = self.params
         self._formation.reset()
+        self._rejoin.reset()
         self.inner.reset()
         self._inner_fresh = False     # inner must be reset before its next step
         self._prev = (0.0, 0.0)       # last output (v, omega)
@@ -137,6 +140,7 @@ class SafetySupervisor:
         if estimate is not None:
             self._last = estimate
             self._search.reset()
+            self._rejoin.record(estimate.walker)
             if not stop and p.formation.policy == "adaptive" and self._rebuild is not None:
                 bearing = self._formation.update(obs.robot, estimate.walker, obstacles)
                 if bearing != p.formation.bearing:
@@ -156,10 +160,14 @@ class SafetySupervisor:
                                velocity if measured else None)
         if measured and not self._started:   # rate limits start from the measured velocity
             self._prev, self._started = saturate(*velocity, self.params.robot), True
-        searching = None
+        searching = None      # (v, omega, reasons) of a search or a rejoin: not the controller
         if lost and not stop:
             searching = self._searching(obs, obstacles, velocity) if fresh else None
             stop = "" if searching is not None else "person_lost"
+        elif not stop and fresh and estimate is not None and p.formation.policy == "adaptive":
+            way = self._rejoin.target(obs.robot, estimate.walker, slot_point(estimate.walker, p),
+                                      obstacles, velocity[0])
+            searching = None if way is None else (*way, "rejoin")
         run = self.delays.params(p) if p.supervisor.delays == "measured" else p
 
         stepped = False
@@ -168,7 +176,7 @@ class SafetySupervisor:
             self._inner_fresh = True  # the controller's filters knew the pose before it
         if searching is not None:
             target = (searching[0], searching[1], 0.0)
-            reasons += ["person_lost", searching[2]]
+            reasons += ["person_lost", searching[2]] if lost else [searching[2]]
             self._inner_fresh = True      # the controller's filters knew the person before
         elif not stop and fresh and not odometry:
             if self._inner_fresh:
@@ -185,7 +193,7 @@ class SafetySupervisor:
             target = (0.0, 0.0, 0.0)
             self._inner_fresh = True
             self._far_since = None    # a stop restarts the slot-error clock
-        elif searching is None:
+        elif not lost:                    # the keep-out: the controller's or a rejoin's
             self._check_slot(obs.robot, estimate, reasons)
             if stepped:
                 requested = limit(target[:2], self._prev, p)
@@ -217,7 +225,7 @@ class SafetySupervisor:
         moved = params.formation.bearing != self._configured.formation.bearing
         self.inner, self.params, self._configured = inner, params, params
         self._formation = FormationPolicy(params, given=moved)
-        self._search.params = params
+        self._search.params = self._rejoin.params = params
         self._odometry.robot = params.robot
         self._inner_fresh = True
         self._far_since = None
@@ -249,7 +257,7 @@ class SafetySupervisor:
         f = self._configured.formation
         self.params = self._configured.replace(formation=dataclasses.replace(f, bearing=bearing))
         self.inner = self._rebuild(self.params)
-        self._search.params = self.params
+        self._search.params = self._rejoin.params = self.params
         self._inner_fresh = True
         return self.params
 

@@ -1,0 +1,114 @@
+"""A shortest way round walls on a small grid, for the rejoin and the search
+(:mod:`companion.control.rejoin`, :mod:`companion.control.search`).
+
+:func:`plan_way` lays a grid of ``cell`` m over the box round the start and the goal, marks
+the cells whose clearance to the walls is below the footprint (or below the start's own,
+where the robot already stands closer: it may stay that close, not come closer) and runs
+Dijkstra (:func:`scipy.sparse.csgraph.dijkstra`) over the free cells, 8-connected, from the
+goal. The way is the chain of cells from the start down the distances; :func:`next_point`
+is where on it to drive now.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from companion.geometry import sweep_clear
+from companion.types import Circle, Obstacle
+
+#: Grid cell (m) and the room (m) round the start and the goal the grid covers.
+CELL, BORDER = 0.1, 3.0
+#: How far along the way (m) the point to drive to may lie.
+LOOKAHEAD = 1.5
+#: The 8 neighbours of a cell and their step lengths (in cells).
+_STEPS = [(di, dj, math.hypot(di, dj)) for di in (-1, 0, 1) for dj in (-1, 0, 1)
+          if (di, dj) != (0, 0)]
+
+
+def clearance_field(xs: np.ndarray, ys: np.ndarray, obstacles: Sequence[Obstacle]
+                    ) -> np.ndarray:
+    """Distance (m) from each point ``(xs[k], ys[k])`` to the nearest obstacle's surface
+    (a wall: its centre-line; inf without obstacles)."""
+    out = np.full(xs.shape, np.inf)
+    for o in obstacles:
+        if isinstance(o, Circle):
+            d = np.hypot(xs - o.x, ys - o.y) - o.radius
+        else:
+            ex, ey = o.x1 - o.x0, o.y1 - o.y0
+            n2 = ex * ex + ey * ey
+            s = np.zeros_like(xs) if n2 == 0.0 else np.clip(
+                ((xs - o.x0) * ex + (ys - o.y0) * ey) / n2, 0.0, 1.0)
+            d = np.hypot(xs - o.x0 - s * ex, ys - o.y0 - s * ey)
+        np.minimum(out, d, out=out)
+    return out
+
+
+def plan_way(start: tuple[float, float], goal: tuple[float, float],
+             obstacles: Sequence[Obstacle], footprint: float, cell: float = CELL,
+             border: float = BORDER) -> list[tuple[float, float]] | None:
+    """The shortest 8-connected way of grid cells from ``start`` to ``goal`` that keeps
+    ``footprint`` m from ``obstacles`` (module docstring), as cell centres from the start's
+    to the goal's; None if the goal is in an obstacle's reach or cut off."""
+    (sx, sy), (gx, gy) = start, goal
+    x0, y0 = min(sx, gx) - border, min(sy, gy) - border
+    nx = int(math.ceil((max(sx, gx) + border - x0) / cell)) + 1
+    ny = int(math.ceil((max(sy, gy) + border - y0) / cell)) + 1
+    xs, ys = np.meshgrid(x0 + cell * np.arange(nx), y0 + cell * np.arange(ny), indexing="ij")
+    clear = clearance_field(xs, ys, obstacles)
+    si, sj = round((sx - x0) / cell), round((sy - y0) / cell)
+    gi, gj = round((gx - x0) / cell), round((gy - y0) / cell)
+    free = clear >= min(footprint, clear[si, sj])
+    if not free[gi, gj]:
+        return None
+    free[si, sj] = True
+    index = np.arange(nx * ny).reshape(nx, ny)
+    rows, cols, costs = [], [], []
+    for di, dj, length in _STEPS:                 # an edge wherever both cells are free
+        src = (_part(di, nx, False), _part(dj, ny, False))
+        dst = (_part(di, nx, True), _part(dj, ny, True))
+        both = free[src] & free[dst]
+        rows.append(index[src][both])
+        cols.append(index[dst][both])
+        costs.append(np.full(int(both.sum()), length))
+    graph = coo_matrix((np.concatenate(costs), (np.concatenate(rows), np.concatenate(cols))),
+                       shape=(nx * ny, nx * ny)).tocsr()
+    dist, before = dijkstra(graph, indices=int(index[gi, gj]), return_predecessors=True)
+    k = int(index[si, sj])
+    if not math.isfinite(dist[k]):
+        return None
+    way = []
+    while k >= 0:
+        i, j = divmod(k, ny)
+        way.append((x0 + cell * i, y0 + cell * j))
+        k = int(before[k])
+    return way
+
+
+def next_point(start: tuple[float, float], goal: tuple[float, float],
+               obstacles: Sequence[Obstacle], footprint: float
+               ) -> tuple[float, float] | None:
+    """Where to drive now on the way to ``goal``: the goal if the footprint can move
+    straight there (:func:`companion.geometry.sweep_clear`), else the farthest point of the
+    planned way within :data:`LOOKAHEAD` m that it can reach straight; None if no way."""
+    if sweep_clear(*start, *goal, obstacles, footprint):
+        return goal
+    way = plan_way(start, goal, obstacles, footprint)
+    if way is None:
+        return None
+    ahead = min(len(way) - 1, int(LOOKAHEAD / CELL))
+    while ahead > 1 and not sweep_clear(*start, *way[ahead], obstacles, footprint):
+        ahead -= 1
+    return way[ahead]
+
+
+def _part(shift: int, n: int, moved: bool) -> slice:
+    """The cells along one axis that have a neighbour ``shift`` away (``moved``: those
+    neighbours)."""
+    if moved:
+        return slice(max(0, shift), n - max(0, -shift))
+    return slice(max(0, -shift), n - max(0, shift))

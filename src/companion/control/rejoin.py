@@ -1,0 +1,73 @@
+"""Back to the slot round the walls (``formation.policy = "adaptive"``, docs/crowds.md
+"Formations").
+
+A robot held up before a door or a corridor's mouth (walkers coming through, a corner) while
+the person walked on can find a wall between itself and its slot; tracking the slot
+straight would press it against the wall, where avoidance and the slot's pull hold it in
+place. While the robot's footprint (its radius and ``keepout.obstacle_clearance``) cannot
+move straight to its slot past the walls (walls and LiDAR wall pieces,
+:func:`companion.geometry.sweep_clear`), :class:`Rejoin` plans the shortest way round them
+(:func:`companion.control.planner.plan_way`) to the slot, or where the slot itself is
+walled in, to the latest point of the person's own way (kept every :data:`SPACING` m, the
+last :data:`LENGTH` m) at least the formation distance behind the person, and drives along
+it (:func:`companion.control.planner.next_point`,
+:func:`companion.control.search.drive_to`); the keep-out and the rate limits still apply.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Sequence
+
+from companion.control.formation import walls_of
+from companion.control.planner import next_point
+from companion.control.search import drive_to
+from companion.geometry import sweep_clear
+from companion.params import Params
+from companion.types import Obstacle, PersonState, Pose
+
+#: Distance (m) between the points kept of the person's way, and how much of it is kept.
+SPACING, LENGTH = 0.25, 15.0
+#: Speed per metre to the point (1/s) and the turn rate on the spot (rad/s).
+SPEED_GAIN, TURN_RATE = 1.5, 1.0
+
+
+class Rejoin:
+    """The person's way, and the way back to the slot round the walls (module docstring)."""
+
+    def __init__(self, params: Params):
+        self.params = params
+        self._trail: deque[tuple[float, float]] = deque(maxlen=int(LENGTH / SPACING))
+
+    def reset(self) -> None:
+        self._trail.clear()
+
+    def record(self, person: PersonState) -> None:
+        """Keep the person's position if it is :data:`SPACING` from the last one kept."""
+        if not (math.isfinite(person.x) and math.isfinite(person.y)):
+            return
+        if not self._trail or math.hypot(person.x - self._trail[-1][0],
+                                         person.y - self._trail[-1][1]) >= SPACING:
+            self._trail.append((person.x, person.y))
+
+    def target(self, robot: Pose, person: PersonState, slot: tuple[float, float],
+               obstacles: Sequence[Obstacle], v_now: float) -> tuple[float, float] | None:
+        """``(v, omega)`` along the way round the walls, or None where the robot can move
+        straight to ``slot`` (or no way is found): the controller tracks the slot."""
+        p = self.params
+        walls, r = walls_of(obstacles), p.robot.radius + p.keepout.obstacle_clearance
+        if not walls or sweep_clear(robot.x, robot.y, *slot, walls, r):
+            return None
+        goals = [slot] + [(x, y) for x, y in reversed(self._trail)
+                          if math.hypot(x - person.x, y - person.y) >= p.formation.distance]
+        for goal in goals[:3]:
+            point = next_point((robot.x, robot.y), goal, walls, r)
+            if point is not None:
+                break
+        else:
+            return None
+        x, y = point
+        speed = min(p.robot.v_max, SPEED_GAIN * math.hypot(x - robot.x, y - robot.y))
+        v, omega, _ = drive_to((x, y), robot, obstacles, v_now, p, speed, TURN_RATE)
+        return v, omega
