@@ -187,8 +187,10 @@ class Split:
         self._squares = {"slot": 0.0, "estimate": 0.0, "tracking": 0.0}
         self._n = {"slot": 0, "estimate": 0, "tracking": 0}
         self._shift, self._acted = 0.0, 0
+        self._final = math.nan
 
     def add(self, log: Log) -> None:
+        self._final = float(log["slot_error_m"][-1])
         for key in self._squares:
             e = log[f"{key}_error_m"]
             e = e[np.isfinite(e)]
@@ -201,6 +203,7 @@ class Split:
     def value(self, steps: int) -> dict:
         out = {f"rms_{key}_error_m": math.sqrt(sq / self._n[key]) if self._n[key] else None
                for key, sq in self._squares.items()}
+        out["final_slot_error_m"] = self._final
         out["safety_shift_m"] = self._shift
         out["safety_share"] = self._acted / steps if steps else 0.0
         return out

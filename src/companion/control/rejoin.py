@@ -6,7 +6,9 @@ the person walked on can find a wall between itself and its slot; tracking the s
 straight would press it against the wall, where avoidance and the slot's pull hold it in
 place. While the robot's footprint (its radius and ``keepout.obstacle_clearance``) cannot
 move straight to its slot past the walls (walls and LiDAR wall pieces,
-:func:`companion.geometry.sweep_clear`), :class:`Rejoin` plans the shortest way round them
+:func:`companion.geometry.sweep_clear`; once on its way round, until that way has
+:data:`RELEASE` m more room, so that the controller's curve to the slot does not clip the
+corner it just rounded), :class:`Rejoin` plans the shortest way round them
 (:func:`companion.control.planner.plan_way`) to the slot, or where the slot itself is
 walled in, to the latest point of the person's own way (kept every :data:`SPACING` m, the
 last :data:`LENGTH` m) at least the formation distance behind the person, and drives along
@@ -29,8 +31,11 @@ from companion.types import Obstacle, PersonState, Pose
 
 #: Distance (m) between the points kept of the person's way, and how much of it is kept.
 SPACING, LENGTH = 0.25, 15.0
-#: Speed per metre to the point (1/s) and the turn rate on the spot (rad/s).
-SPEED_GAIN, TURN_RATE = 1.5, 1.0
+#: Speed per metre to the point (1/s), the turn rate (rad/s) and the heading error (rad)
+#: above which the robot turns on the spot.
+SPEED_GAIN, TURN_RATE, FACING = 1.5, 1.0, 0.8
+#: Room (m) beyond the footprint the straight way to the slot needs before a rejoin ends.
+RELEASE = 0.3
 
 
 class Rejoin:
@@ -39,9 +44,11 @@ class Rejoin:
     def __init__(self, params: Params):
         self.params = params
         self._trail: deque[tuple[float, float]] = deque(maxlen=int(LENGTH / SPACING))
+        self.active = False           # on the way round the walls
 
     def reset(self) -> None:
         self._trail.clear()
+        self.active = False
 
     def record(self, person: PersonState) -> None:
         """Keep the person's position if it is :data:`SPACING` from the last one kept."""
@@ -57,7 +64,9 @@ class Rejoin:
         straight to ``slot`` (or no way is found): the controller tracks the slot."""
         p = self.params
         walls, r = walls_of(obstacles), p.robot.radius + p.keepout.obstacle_clearance
-        if not walls or sweep_clear(robot.x, robot.y, *slot, walls, r):
+        room = r + RELEASE if self.active else r
+        self.active = bool(walls) and not sweep_clear(robot.x, robot.y, *slot, walls, room)
+        if not self.active:
             return None
         goals = [slot] + [(x, y) for x, y in reversed(self._trail)
                           if math.hypot(x - person.x, y - person.y) >= p.formation.distance]
@@ -66,8 +75,10 @@ class Rejoin:
             if point is not None:
                 break
         else:
+            self.active = False
             return None
         x, y = point
         speed = min(p.robot.v_max, SPEED_GAIN * math.hypot(x - robot.x, y - robot.y))
-        v, omega, _ = drive_to((x, y), robot, obstacles, v_now, p, speed, TURN_RATE)
+        v, omega, _ = drive_to((x, y), robot, obstacles, v_now, p, speed, TURN_RATE,
+                                FACING)
         return v, omega

@@ -85,16 +85,17 @@ class Search:
 
 
 def drive_to(goal: tuple[float, float], robot: Pose, obstacles: Sequence[Obstacle],
-             v_now: float, params: Params, speed: float, turn_rate: float | None = None
-             ) -> tuple[float, float, bool]:
+             v_now: float, params: Params, speed: float, turn_rate: float | None = None,
+             facing: float = FACING) -> tuple[float, float, bool]:
     """``(v, omega, facing)`` towards ``goal``: turn on the spot (at up to ``turn_rate``,
-    default ``search.turn_rate``) until facing it within :data:`FACING`, then drive at up to
-    ``speed``, never faster than the braking bound of every obstacle seen."""
+    default ``search.turn_rate``) until facing it within ``facing`` rad, then drive (turning
+    on) at up to ``speed`` times the cosine of the heading error, never faster than the
+    braking bound of every obstacle seen."""
     rate = params.search.turn_rate if turn_rate is None else turn_rate
     gx, gy = goal
     error = wrap_pi(math.atan2(gy - robot.y, gx - robot.x) - robot.theta)
     turn = max(-rate, min(rate, TURN_GAIN * error))
-    if abs(error) > FACING:
+    if abs(error) > facing:
         return 0.0, turn, False
     v = clip_to(min(speed, params.robot.v_max) * math.cos(error),
                 obstacle_bounds(robot, obstacles, params, v_now), params.robot.v_max)
