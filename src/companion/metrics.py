@@ -209,11 +209,30 @@ class Split:
         return out
 
 
+class Runs:
+    """The longest run of True samples of a boolean series given in consecutive blocks."""
+
+    def __init__(self) -> None:
+        self.now, self.longest = 0, 0       # samples: the run at the end so far, the longest
+
+    def add(self, mask: np.ndarray) -> None:
+        false = np.flatnonzero(~mask)
+        if len(false) == 0:                 # true through the block
+            self.now += len(mask)
+        else:                               # the runs of true samples in it
+            runs = np.diff(np.concatenate(([-1], false))) - 1
+            runs[0] += self.now             # carried over from the blocks before
+            self.longest = max(self.longest, int(runs.max()))
+            self.now = len(mask) - 1 - int(false[-1])
+        self.longest = max(self.longest, self.now)
+
+
 #: Proxemic zones (m of gap between bodies): intimate below the first, personal up to the
 #: second (Hall's distances, as the social-navigation literature uses them).
 INTIMATE_M, PERSONAL_M = 0.45, 1.2
-#: Below this speed (m/s) the robot is standing (for the longest stop).
-STANDING_MPS = 0.05
+#: Below this speed (m/s) the robot is standing (for the longest stop); from this one (m/s)
+#: the person walks.
+STANDING_MPS, WALKING_MPS = 0.05, 0.3
 #: Time (s) in the detector's view while lost that counts as a chance to re-find the person
 #: (the tracker needs ``tracker.reacquire_time_s``, 0.3 s, of consistent detections).
 REFIND_VIEW_S = 0.5
@@ -235,7 +254,7 @@ class Social:
         self._walker_intimate = self._intimate = self._personal = 0   # samples
         self._length, self._jerk_sq, self._jerks = 0.0, 0.0, 0
         self._prev: np.ndarray | None = None     # the last two rows' t, x, y, v
-        self._stop, self._longest = 0, 0          # samples standing: now, longest
+        self._stops, self._stops_walking = Runs(), Runs()   # standing; while the person walks
         self._dt = 0.0                            # the sample period, once two samples came
         self._samples = self._in_view = self._searching = 0
         self._losses = self._refinds = self._chances = 0
@@ -266,15 +285,9 @@ class Social:
             self._jerk_sq += float(np.sum(jerk * jerk))
             self._jerks += len(jerk)
         self._prev = rows[:, -2:]
-        moving = np.flatnonzero(np.abs(log["robot_v"]) >= STANDING_MPS)
-        if len(moving) == 0:                     # standing through the block
-            self._stop += len(log["robot_v"])
-        else:                                    # the runs of standing samples in it
-            runs = np.diff(np.concatenate(([-1], moving))) - 1
-            runs[0] += self._stop                 # carried over from the blocks before
-            self._longest = max(self._longest, int(runs.max()))
-            self._stop = len(log["robot_v"]) - 1 - int(moving[-1])
-        self._longest = max(self._longest, self._stop)
+        standing = np.abs(log["robot_v"]) < STANDING_MPS
+        self._stops.add(standing)
+        self._stops_walking.add(standing & (np.abs(log["person_v"]) >= WALKING_MPS))
         self._finding(log)
 
     def _finding(self, log: Log) -> None:
@@ -315,7 +328,8 @@ class Social:
                 "path_length_m": self._length,
                 "jerk_rms_mps3": math.sqrt(self._jerk_sq / self._jerks) if self._jerks
                 else 0.0,
-                "longest_stop_s": self._longest * dt,
+                "longest_stop_s": self._stops.longest * dt,
+                "longest_stop_person_walking_s": self._stops_walking.longest * dt,
                 "person_in_view_share": self._in_view / self._samples if self._samples
                 else None,
                 "person_losses": self._losses,

@@ -134,6 +134,8 @@ def test_social_measures_of_a_straight_steady_walk():
     assert m["longest_stop_s"] == 0.0
     cols["robot_v"][50:90] = 0.0                           # a 2 s stop across blocks
     cols["robot_v"][150:160] = 0.0
+    cols["person_v"][:] = 1.0
+    cols["person_v"][50:75] = 0.0                          # the person stood for 1.25 s of it
     stopped = Log({**cols, "status": log["status"], "reason": log["reason"]})
     for sizes in ([n], [37] * 6, [1] * n):
         social = metrics.Social()
@@ -142,6 +144,7 @@ def test_social_measures_of_a_straight_steady_walk():
             social.add(Log({k: v[start:start + size] for k, v in stopped.columns.items()}))
             start += size
         assert social.value()["longest_stop_s"] == pytest.approx(40 * dt)
+        assert social.value()["longest_stop_person_walking_s"] == pytest.approx(15 * dt)
 
 
 def test_a_crowd_episode_is_the_same_in_a_worker_process():

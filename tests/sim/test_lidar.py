@@ -10,7 +10,7 @@ from companion.config import build, field_docs
 from companion.errors import ConfigError
 from companion.geometry import clearance
 from companion.params import LidarParams
-from companion.sim.lidar import beam_angles, cast, scan_points
+from companion.sim.lidar import WALL_END, beam_angles, cast, scan_points, wall_ends
 from companion.types import Circle, Pose, Scan, Wall
 
 EXACT = LidarParams(noise_std=0.0)
@@ -40,12 +40,12 @@ def test_circle_ahead():
 
 def test_wall_ranges_are_two_over_cos():
     scan = cast(ORIGIN, [], [Wall(2.0, -5.0, 2.0, 5.0)], None, EXACT, None)
-    extent = math.atan2(5.0, 2.0)
-    inside = np.abs(scan.angles) < extent - 1e-9
+    inside = np.abs(scan.angles) < math.atan2(5.0 - 2 * WALL_END, 2.0)   # off the ends
     assert inside.sum() > 100
     np.testing.assert_allclose(scan.ranges[inside], 2.0 / np.cos(scan.angles[inside]),
                                rtol=1e-12)
-    assert np.all(np.isinf(scan.ranges[np.abs(scan.angles) > extent + 1e-9]))
+    beyond = np.abs(scan.angles) > math.atan2(5.0 + WALL_END, 2.0 - WALL_END)
+    assert np.all(np.isinf(scan.ranges[beyond]))
 
 
 def test_beam_parallel_to_wall_misses():
@@ -57,7 +57,15 @@ def test_beam_parallel_to_wall_misses():
 
 def test_beam_along_a_collinear_wall_hits_its_near_end():
     scan = cast(ORIGIN, [], [Wall(2.0, 0.0, 5.0, 0.0)], None, EXACT, None)
-    assert scan.ranges[beam(scan, 0.0)] == pytest.approx(2.0, abs=1e-12)
+    assert scan.ranges[beam(scan, 0.0)] == pytest.approx(2.0 - WALL_END, abs=1e-12)
+
+
+def test_a_wall_seen_edge_on_shows_its_end():
+    """A robot in line with a wall (1 cm off it) sees the wall's end face, not through it:
+    a zero-thickness end would be invisible, and a robot would drive into it."""
+    scan = cast(ORIGIN, [], [Wall(2.0, 0.01, 5.0, 0.01)], None, EXACT, None)
+    ahead = scan.ranges[np.abs(scan.angles) < 0.02]
+    assert np.isfinite(ahead).any() and np.nanmin(ahead) < 2.0
     assert math.isinf(scan.ranges[beam(scan, -math.pi)])
 
 
@@ -236,7 +244,7 @@ def worlds(draw):
 def test_every_return_lies_on_a_surface(world):
     circles, walls, person, pose = world
     params = LidarParams(noise_std=0.0, range_max=8.0, resolution=math.radians(1.0))
-    objects = list(circles) + list(walls)
+    objects = list(circles) + list(walls) + wall_ends(walls)
     if person is not None:
         objects.append(Circle(person[0], person[1], params.person_radius))
     assume(all(clearance(o, pose.x, pose.y) > 1e-6 for o in objects))

@@ -1,7 +1,9 @@
 """A simulated planar (2D) LiDAR: exact, vectorised ray casting against the world's obstacles.
 
 One ray per beam from the robot's pose, intersected in closed form with every circle, wall
-segment (zero thickness) and the person's body (a circle); the nearest hit is the range.
+segment (zero thickness, its ends rounded off by circles of :data:`WALL_END` m: a real wall's
+end face, which a zero-thickness end would hide from a robot in line with the wall) and the
+person's body (a circle); the nearest hit is the range.
 Beam angles are in the robot frame, increasing and centred on the heading (a full circle has
 an even number of beams from -pi, none at +pi). Ranges are ``inf`` where nothing is hit within
 ``range_max`` and 0 for a ray starting inside a circle; NaN never comes out of :func:`cast`
@@ -21,6 +23,8 @@ from companion.params import LidarParams
 from companion.types import Circle, Pose, Scan, Wall
 
 _FULL_CIRCLE_TOL = 1e-9
+#: Radius (m) of the rounded end of every wall the LiDAR sees.
+WALL_END = 0.05
 
 
 @functools.lru_cache(maxsize=16)
@@ -97,6 +101,11 @@ def _ray_segments(ox: float, oy: float, dirs: np.ndarray,
     return t.min(axis=1)
 
 
+def wall_ends(walls: Sequence[Wall]) -> list[Circle]:
+    """The rounded ends the LiDAR sees of ``walls``: a circle of :data:`WALL_END` m at each."""
+    return [Circle(x, y, WALL_END) for w in walls for x, y in ((w.x0, w.y0), (w.x1, w.y1))]
+
+
 def cast(pose: Pose, circles: Sequence[Circle], walls: Sequence[Wall],
          person: tuple[float, float] | None, params: LidarParams,
          rng: np.random.Generator | None = None) -> Scan:
@@ -127,6 +136,7 @@ def cast(pose: Pose, circles: Sequence[Circle], walls: Sequence[Wall],
     dirs = np.column_stack((ca * ct - sa * st, sa * ct + ca * st))  # world-frame unit vectors
     ranges = np.full(angles.shape, np.inf)
 
+    circles = [*circles, *wall_ends(walls)]
     cx = [c.x for c in circles]
     cy = [c.y for c in circles]
     cr = [c.radius for c in circles]
