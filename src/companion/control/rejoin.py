@@ -31,11 +31,12 @@ from companion.types import Obstacle, PersonState, Pose
 
 #: Distance (m) between the points kept of the person's way, and how much of it is kept.
 SPACING, LENGTH = 0.25, 15.0
-#: Speed per metre to the point (1/s), the turn rate (rad/s) and the heading error (rad)
-#: above which the robot turns on the spot.
-SPEED_GAIN, TURN_RATE, FACING = 1.5, 1.0, 0.8
-#: Room (m) beyond the footprint the straight way to the slot needs before a rejoin ends.
-RELEASE = 0.3
+#: Speed per metre to the point (1/s), the least speed (m/s) and the heading error (rad)
+#: above which the robot turns on the spot (at up to ``robot.omega_max``).
+SPEED_GAIN, MIN_SPEED, FACING = 1.5, 0.3, 0.8
+#: Room (m) beyond the footprint the straight way to the slot needs before a rejoin ends,
+#: and the way round keeps (so that it does not run along the keep-out's obstacle barrier).
+RELEASE, MARGIN = 0.3, 0.05
 
 
 class Rejoin:
@@ -71,14 +72,15 @@ class Rejoin:
         goals = [slot] + [(x, y) for x, y in reversed(self._trail)
                           if math.hypot(x - person.x, y - person.y) >= p.formation.distance]
         for goal in goals[:3]:
-            point = next_point((robot.x, robot.y), goal, walls, r)
+            point = next_point((robot.x, robot.y), goal, walls, r + MARGIN)
             if point is not None:
                 break
         else:
             self.active = False
             return None
         x, y = point
-        speed = min(p.robot.v_max, SPEED_GAIN * math.hypot(x - robot.x, y - robot.y))
-        v, omega, _ = drive_to((x, y), robot, obstacles, v_now, p, speed, TURN_RATE,
-                                FACING)
+        speed = min(p.robot.v_max,
+                    max(MIN_SPEED, SPEED_GAIN * math.hypot(x - robot.x, y - robot.y)))
+        v, omega, _ = drive_to((x, y), robot, obstacles, v_now, p, speed, p.robot.omega_max,
+                               FACING)
         return v, omega
