@@ -86,21 +86,17 @@ class Search:
 
 def drive_to(goal: tuple[float, float], robot: Pose, obstacles: Sequence[Obstacle],
              v_now: float, params: Params, speed: float, turn_rate: float | None = None,
-             facing: float = FACING, reverse: bool = False) -> tuple[float, float, bool]:
+             facing: float = FACING) -> tuple[float, float, bool]:
     """``(v, omega, facing)`` towards ``goal``: turn on the spot (at up to ``turn_rate``,
     default ``search.turn_rate``) until facing it within ``facing`` rad, then drive (turning
     on) at up to ``speed`` times the cosine of the heading error, never faster than the
-    braking bound of every obstacle seen. With ``reverse``, a goal behind the robot (within
-    ``facing`` of straight behind) is backed towards instead."""
+    braking bound of every obstacle seen."""
     rate = params.search.turn_rate if turn_rate is None else turn_rate
     gx, gy = goal
     error = wrap_pi(math.atan2(gy - robot.y, gx - robot.x) - robot.theta)
-    sign = 1.0
-    if reverse and abs(error) > math.pi - facing:
-        sign, error = -1.0, wrap_pi(error + math.pi)
     turn = max(-rate, min(rate, TURN_GAIN * error))
     if abs(error) > facing:
         return 0.0, turn, False
-    v = clip_to(sign * min(speed, params.robot.v_max) * math.cos(error),
+    v = clip_to(min(speed, params.robot.v_max) * math.cos(error),
                 obstacle_bounds(robot, obstacles, params, v_now), params.robot.v_max)
     return v, turn, True
