@@ -65,7 +65,6 @@ def plan_way(start: tuple[float, float], goal: tuple[float, float],
     free = clear >= min(footprint, clear[si, sj])
     if not free[gi, gj]:
         return None
-    free[si, sj] = True
     index = np.arange(nx * ny).reshape(nx, ny)
     rows, cols, costs = [], [], []
     for di, dj, length in _STEPS:                 # an edge wherever both cells are free
