@@ -63,3 +63,17 @@ def test_no_way_to_a_walled_in_goal_and_next_point_goes_straight_where_it_can():
     assert next_point((14.0, 0.0), (16.0, 0.0), DOOR, FOOTPRINT) == (16.0, 0.0)
     x, y = next_point((14.5, 1.6), (17.0, 1.0), DOOR, FOOTPRINT)
     assert sweep_clear(14.5, 1.6, x, y, DOOR, FOOTPRINT) and x <= 15.0 and y < 1.6
+
+
+def test_the_way_keeps_to_where_the_person_walked_where_a_wall_may_be_unseen():
+    # a robot pushed out past a corridor's mouth (wall y = 1.5 from x = 5 on): its LiDAR
+    # shows the wall's end and a walker by the wall, not the wall itself
+    seen = [Circle(5.0, 1.5, 0.07, piece=True), Circle(5.6, 1.2, 0.45, piece=True)]
+    start, slot = (4.57, 1.62), (7.5, 1.0)
+    walked = [(0.25 * k, 0.1) for k in range(40)]           # the person's way, y = 0.1
+    shortest = plan_way(start, slot, seen, 0.45)
+    assert any(y > 1.9 for x, y in shortest if 5.0 < x < 6.5)   # over the unseen wall
+    kept = plan_way(start, slot, seen, 0.45, along=walked)
+    assert all(y < 1.5 for x, y in kept if 5.0 < x < 7.0)       # into the mouth
+    assert next_point(start, slot, seen, 0.45, walked)[1] < start[1]   # it heads down
+    assert next_point(start, slot, seen, 0.45)[1] > start[1]           # it heads up

@@ -54,3 +54,18 @@ def test_the_persons_way_is_kept_every_spacing():
     assert list(rejoin._trail) == [(0.0, 0.0), (SPACING, 0.0), (1.0, 0.0)]
     rejoin.reset()
     assert not rejoin._trail and not rejoin.active
+
+
+def test_outside_a_corridor_wall_it_goes_back_the_persons_way_not_over_the_unseen_wall():
+    # pushed out past the corridor's mouth (wall y = 1.5 from x = 5 on), the LiDAR shows the
+    # wall's end and a walker by it; the person walked in along y = 0.1
+    seen = (Circle(5.0, 1.5, 0.07, piece=True), Circle(5.6, 1.2, 0.45, piece=True))
+    robot, slot = Pose(4.57, 1.62, 0.0), (7.5, 1.0)
+    person = dataclasses.replace(PERSON, x=8.5, y=0.1)
+    walked = _rejoin()
+    for k in range(35):
+        walked.record(dataclasses.replace(PERSON, x=0.25 * k, y=0.1))
+    _, omega = walked.target(robot, person, slot, seen, 0.0)
+    assert walked.active and omega < 0.0                   # right, down into the mouth
+    _, omega = _rejoin().target(robot, person, slot, seen, 0.0)
+    assert omega > 0.0                                     # without it: left, over the top

@@ -9,10 +9,10 @@ move straight to its slot past the walls (walls and LiDAR wall pieces,
 :func:`companion.geometry.sweep_clear`; once on its way round, until that way has
 :data:`RELEASE` m more room, so that the controller's curve to the slot does not clip the
 corner it just rounded), :class:`Rejoin` plans the shortest way round them
-(:func:`companion.control.planner.plan_way`) to the slot, or where the slot itself is
-walled in, to the latest point of the person's own way (kept every :data:`SPACING` m, the
-last :data:`LENGTH` m) at least the formation distance behind the person, and drives along
-it (:func:`companion.control.planner.next_point`,
+(:func:`companion.control.planner.plan_way`), keeping to the person's own way (kept every
+:data:`SPACING` m, the last :data:`LENGTH` m) where it can, to the slot, or where the slot
+itself is walled in, to the latest point of the person's way at least the formation
+distance behind the person, and drives along it (:func:`companion.control.planner.next_point`,
 :func:`companion.control.search.drive_to`); the keep-out and the rate limits still apply.
 """
 
@@ -72,7 +72,7 @@ class Rejoin:
         goals = [slot] + [(x, y) for x, y in reversed(self._trail)
                           if math.hypot(x - person.x, y - person.y) >= p.formation.distance]
         for goal in goals[:3]:
-            point = next_point((robot.x, robot.y), goal, walls, r + MARGIN)
+            point = next_point((robot.x, robot.y), goal, walls, r + MARGIN, self._trail)
             if point is not None:
                 break
         else:
