@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from companion import metrics
+from companion import social as measures
 from companion.errors import ConfigError
 from companion.geometry import line_of_sight
 from companion.params import REALISTIC, Params
@@ -121,7 +122,7 @@ def test_social_measures_of_a_straight_steady_walk():
                 person_gap_m=np.where(t < 4.0, 0.3, 0.8))
     cols["walker_contact"][[10, 20]] = (1.0, 2.0)
     log = Log({**cols, "status": np.array(["ok"] * n), "reason": np.array([""] * n)})
-    social = metrics.Social()
+    social = measures.Social()
     for a in range(0, n, 37):                             # in blocks, as a run streams it
         social.add(Log({k: v[a:a + 37] for k, v in log.columns.items()}))
     m = social.value()
@@ -138,7 +139,7 @@ def test_social_measures_of_a_straight_steady_walk():
     cols["person_v"][50:75] = 0.0                          # the person stood for 1.25 s of it
     stopped = Log({**cols, "status": log["status"], "reason": log["reason"]})
     for sizes in ([n], [37] * 6, [1] * n):
-        social = metrics.Social()
+        social = measures.Social()
         start = 0
         for size in sizes:
             social.add(Log({k: v[start:start + size] for k, v in stopped.columns.items()}))
@@ -168,7 +169,7 @@ def test_losing_refinding_searching_and_view_are_counted_across_blocks():
     reason[80:] = "person_lost"                             # lost again, not re-found
     log = Log({**cols, "status": np.array(["ok"] * n), "reason": reason.astype(str)})
     for size in (n, 7, 1):
-        social = metrics.Social()
+        social = measures.Social()
         for a in range(0, n, size):
             social.add(Log({k: v[a:a + size] for k, v in log.columns.items()}))
         m = social.value()
