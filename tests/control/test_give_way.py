@@ -97,3 +97,30 @@ def test_a_walker_with_a_broken_velocity_is_dropped_and_reported(bad):
                                  (walker,), None, (1.0, 0.0)))
     assert math.isfinite(cmd.v) and math.isfinite(cmd.omega)
     assert "obstacle_invalid" in cmd.reason.split("+")
+
+
+def test_a_robot_searching_for_a_lost_person_gives_way_too():
+    """The companion's detections stop at 1 s; the robot stops and searches (there is no
+    person to keep out of) while a blind walker comes along its line from 7 m ahead."""
+
+    def closest(p: Params) -> tuple[float, list[str]]:
+        stack = make_controller("lqr", p)
+        x, y, th, v, w = -p.robot.d, 1.0, 0.0, 0.0, 0.0
+        gap, reasons = math.inf, []
+        for k in range(round(7.0 / p.dt)):
+            t = k * p.dt
+            seen = (PersonDetection(t, 0.0, 0.0, covariance=(1e-4, 0.0, 0.0, 1e-4)),) \
+                if t < 1.0 else ()
+            walker = Circle(7.0 - WALKER_SPEED * t, 1.0, 0.25, vx=-WALKER_SPEED)
+            gap = min(gap, math.hypot(walker.x - x, walker.y - y) - 0.25 - p.robot.radius)
+            cmd = stack.step(Observation(t, Pose(x, y, th), None, (walker,), None, (v, w), seen))
+            reasons.append(cmd.reason)
+            v, w = cmd.v, cmd.omega
+            x, y, th = unicycle_step(x, y, th, v, w, p.dt)
+        return gap, reasons
+
+    held, _ = closest(without(Params(), give_way=False, predict=False))
+    assert held < 0.0                         # the walker walks into the searching robot
+    gap, reasons = closest(without(Params(), predict=False))
+    assert gap > 0.0
+    assert any("search" in r and "give_way" in r for r in reasons)

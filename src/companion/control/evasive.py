@@ -105,7 +105,7 @@ _rollout_margins = kernel(rollout_margins)
 
 
 def evasive_target(robot: Pose, current: tuple[float, float], nominal: tuple[float, float],
-                   person: PersonState, obstacles: Sequence[Obstacle], params: Params,
+                   person: PersonState | None, obstacles: Sequence[Obstacle], params: Params,
                    grow: float = 0.0, spread: float = 0.0, needed: float = 0.05,
                    comfort: float = 0.2, horizon: float = 1.2, step: float = ROLLOUT_STEP
                    ) -> tuple[float, float] | None:
@@ -116,10 +116,13 @@ def evasive_target(robot: Pose, current: tuple[float, float], nominal: tuple[flo
 
     The replacement is the grid target with the best ``min(margin, comfort) - 0.02 * change``:
     margins count up to ``comfort`` m, and among equally safe targets the one closest to the
-    nominal (``change`` in units of v_max and omega_max) wins.
+    nominal (``change`` in units of v_max and omega_max) wins. Without a ``person`` (lost)
+    only the obstacles count.
     """
     r, s, k = params.robot, params.supervisor, params.keepout
     targets = np.vstack([nominal, _GRID * (r.v_max, r.omega_max)])
+    if person is None:           # a protective distance of -inf: the person never counts
+        person, grow = PersonState(robot.x, robot.y, 0.0, 0.0, 0.0), -math.inf
     spec = Rollout(person.x, person.y, person.theta, person.v, person.omega, k.person_accel,
                    k.protective_distance + grow, r.radius, min(s.accel_max, s.decel_max),
                    s.angular_accel_max, step, int(round(horizon / step)),
@@ -135,13 +138,14 @@ def evasive_target(robot: Pose, current: tuple[float, float], nominal: tuple[flo
 
 
 def give_way_target(robot: Pose, current: tuple[float, float], nominal: tuple[float, float],
-                    person: PersonState, obstacles: Sequence[Obstacle], params: Params,
+                    person: PersonState | None, obstacles: Sequence[Obstacle], params: Params,
                     grow: float = 0.0, spread: float = 0.0) -> tuple[float, float] | None:
     """Giving way: if a moving circle (a walker, at constant velocity) would come within
     ``keepout.give_way_margin`` of the footprint over the evasive horizon on the ``nominal``
     command's path, the evasive check's replacement (:func:`evasive_target`, everything
-    counted) for that margin; else None. Whether the walker or the robot would close the gap
-    does not matter here: a robot that can move does not stand in a walker's way."""
+    counted; the person too unless ``person`` is None: lost) for that margin; else None.
+    Whether the walker or the robot would close the gap does not matter here: a robot that
+    can move does not stand in a walker's way."""
     r, s, k = params.robot, params.supervisor, params.keepout
     horizon = k.evasive_horizon_s
     if k.give_way_margin <= 0.0:
@@ -151,7 +155,7 @@ def give_way_target(robot: Pose, current: tuple[float, float], nominal: tuple[fl
               <= (r.v_max + math.hypot(o.vx, o.vy)) * horizon + k.give_way_margin]
     if not movers:
         return None
-    spec = Rollout(person.x, person.y, person.theta, 0.0, 0.0, 0.0, -math.inf, r.radius,
+    spec = Rollout(robot.x, robot.y, 0.0, 0.0, 0.0, 0.0, -math.inf, r.radius,
                    min(s.accel_max, s.decel_max), s.angular_accel_max, ROLLOUT_STEP,
                    int(round(horizon / ROLLOUT_STEP)), params.sensing.actuator_tau_s)
     margin = _rollout_margins(robot.x, robot.y, robot.theta, float(current[0]),

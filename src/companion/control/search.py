@@ -14,6 +14,8 @@ the status reason:
 
 The search ends after ``search.max_time_s`` or once the robot is ``search.max_distance_m``
 from where it stopped; then it holds. Detections that the tracker accepts end it at once.
+The supervisor gives way to walkers on the search's commands
+(:func:`companion.control.evasive.give_way_target`, without a person).
 """
 
 from __future__ import annotations

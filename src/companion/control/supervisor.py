@@ -17,7 +17,8 @@ and the person estimate. Per call:
    effect (the actuator lag on), the same for every controller;
 5. keep-out rules, with the protective distance grown by the person's uncertainty, the last
    of them checking the command as the rate limits will send it against the last command
-   (:func:`companion.control.keepout.keep_out`);
+   (:func:`companion.control.keepout.keep_out`); while searching, giving way to walkers only
+   (:func:`companion.control.evasive.give_way_target`);
 6. rate and velocity limits (:func:`companion.control.limits.limit`); a stopped robot's target
    is zero, so it brakes at the limits.
 
@@ -35,6 +36,7 @@ from collections.abc import Callable
 from companion.control import checks
 from companion.control.base import Controller, saturate
 from companion.control.delays import DelayMeter
+from companion.control.evasive import give_way_target
 from companion.control.formation import FormationPolicy
 from companion.control.keepout import keep_out
 from companion.control.limits import limit
@@ -199,6 +201,11 @@ class SafetySupervisor:
                 requested = limit(target[:2], self._prev, p)
             target = keep_out(target, obs.robot, estimate, obstacles, velocity, run, reasons,
                               self._prev)
+        else:                             # searching: no person to keep out of; walkers
+            way = give_way_target(obs.robot, velocity, target[:2], None, obstacles, run)
+            if way is not None:
+                target = (*way, 0.0)
+                reasons.append("give_way")
         self._prev = limit(target[:2], self._prev, p)
         if fresh:
             self.delays.sent(obs.t, self._prev)
