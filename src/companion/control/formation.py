@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+from companion.control.slot import slot_point
 from companion.geometry import sweep_clear, wrap_2pi, wrap_pi
 from companion.params import BEHIND, LEFT, RIGHT, Params
 from companion.types import Circle, Obstacle, PersonState, Pose, Wall
@@ -108,9 +109,9 @@ class FormationPolicy:
     def __init__(self, params: Params, given: bool = False):
         """``given``: the configured side is the first choice (a side the user just set),
         not the side the robot is on."""
+        self.params = params
         self.configured = params.formation.bearing
-        self.distance, self.radius = params.formation.distance, params.robot.radius
-        self.need = self.distance + self.radius + MARGIN
+        self.need = params.formation.distance + params.robot.radius + MARGIN
         self.lane = 2.0 * (params.robot.radius + MARGIN)   # to pass an obstacle's far side
         # (while the person walks: beside a standing person the slot itself must be free)
         self.step = BEARING_RATE * params.dt
@@ -158,9 +159,9 @@ class FormationPolicy:
                    obstacles: Sequence[Obstacle]) -> bool:
         """The robot's footprint can move straight to its slot on the chosen side without
         meeting a wall or a LiDAR wall piece."""
-        a = person.theta + self._side
-        sx, sy = person.x + self.distance * math.cos(a), person.y + self.distance * math.sin(a)
-        return sweep_clear(robot.x, robot.y, sx, sy, walls_of(obstacles), self.radius)
+        sx, sy = slot_point(person, self.params, self._side)
+        return sweep_clear(robot.x, robot.y, sx, sy, walls_of(obstacles),
+                           self.params.robot.radius)
 
 
 def walls_of(obstacles: Sequence[Obstacle]) -> list[Obstacle]:

@@ -20,10 +20,12 @@ def reference_point(robot: Pose, d: float) -> tuple[float, float]:
     return offset_point(robot.x, robot.y, robot.theta, d)
 
 
-def slot_point(person: PersonState, params: Params) -> tuple[float, float]:
-    """S, the desired position of R."""
+def slot_point(person: PersonState, params: Params, bearing: float | None = None
+               ) -> tuple[float, float]:
+    """S, the desired position of R (at ``bearing``, rad, instead of the formation's if
+    given)."""
     f = params.formation
-    a = person.theta + f.bearing
+    a = person.theta + (f.bearing if bearing is None else bearing)
     return person.x + f.distance * math.cos(a), person.y + f.distance * math.sin(a)
 
 
