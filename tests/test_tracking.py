@@ -190,6 +190,20 @@ def test_dropout_is_predicted_then_the_person_is_lost_and_reacquired():
     assert tr.estimate(5.3).state.x == pytest.approx(1.2 * 5.3, abs=0.05)
 
 
+def test_a_re_find_whose_detections_stop_is_a_loss_again_not_a_wait():
+    """One detection where the lost person may be begins a re-find; if no other follows
+    within ``lost_after_s`` the tracker is plainly lost again (the supervisor searches) instead
+    of waiting for ever for the re-find's next detection (a person at the edge of the
+    detector's range: one detection, then none)."""
+    tr = PersonTracker(TP)
+    walk(tr, np.arange(0.0, 4.05, 0.1), straight)
+    assert tr.estimate(4.0 + TP.lost_after_s + 0.01) is None and tr.lost
+    tr.add([seen(5.0, 6.0, 0.5)], 5.0)
+    assert tr.estimate(5.0 + TP.lost_after_s - 0.01) is None and tr.reacquiring
+    assert tr.estimate(5.0 + TP.lost_after_s + 0.01) is None
+    assert tr.lost and not tr.reacquiring
+
+
 def test_inconsistent_detections_do_not_reacquire():
     tr = PersonTracker(TP)
     walk(tr, np.arange(0.0, 1.05, 0.1), straight)

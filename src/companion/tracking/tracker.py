@@ -311,6 +311,8 @@ class PersonTracker:
         p = self.params
         reasons = [] if reasons is None else reasons
         if not self._history or self.lost:
+            if self._candidate and now - self._candidate[-1].t > p.lost_after_s:
+                self._candidate = []   # the detections of a re-find stopped: lost again
             return None
         last = self._history[-1]
         age = now - last.t
