@@ -102,7 +102,7 @@ def test_scenario_faults_run_and_show_in_the_log(tmp_path, capsys):
     text = (tmp_path / "o" / "log.csv").read_text().splitlines()
     assert text[0].endswith(",status,reason")
     assert any(",stopped,person_lost" in line for line in text)
-    assert any(",degraded,slot_error" in line for line in text)   # catching up: far behind
+    assert any(",degraded,person_lost+search_approach" in line for line in text)  # then looks
     assert text[-1].endswith(",ok,")
 
 

@@ -1,5 +1,7 @@
 """The steppable simulator: driven by hand it is the episode runner; reset(seed) repeats."""
 
+import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -9,10 +11,10 @@ from companion.control import make_controller
 from companion.params import REALISTIC, Params
 from companion.sim.episode import Simulator, run_episode
 from companion.sim.faults import Fault
-from companion.sim.person import Figure8
+from companion.sim.person import Figure8, line
 from companion.sim.scenario import load_scenario
 from companion.sim.sensing import make_perception
-from companion.types import LOG_COLUMNS, Command
+from companion.types import LOG_COLUMNS, Circle, Command
 
 P = Params(sensing=REALISTIC)
 FAULTS = (Fault("stall", 2.0, 3.2), Fault("person_dropout", 4.0, 4.3))
@@ -114,3 +116,24 @@ def test_two_controllers_on_one_seed_see_the_same_detections_with_the_lidar_on()
     np.testing.assert_array_equal(scans["lqr"].ranges, scans["pid"].ranges)
     gap = np.max(np.hypot(*(np.array(paths["lqr"]) - np.array(paths["pid"])).T))
     assert gap > 0.05                         # the robots did move differently
+
+
+def test_a_lost_person_hides_nothing_from_the_lidar():
+    """The LiDAR's obstacles leave out the person where the robot believes them to be; once
+    the person is lost there is no such place, so a pillar standing where they were last
+    seen is an obstacle (hidden, a searching robot drove into a door's wall end where the
+    person had last been seen). The ROS node follows the same rule."""
+    params = Params(sensing=dataclasses.replace(REALISTIC, person_range_m=3.0))
+    pillar = Circle(6.3, 0.4, 0.3)      # near where they are last seen (x about 6)
+    sim = Simulator(line((0.0, 0.0, 0.0), 2.5), params, 6.0, obstacles=(pillar,),
+                    perception=make_perception("lidar", params))   # runs out of range
+    ctrl = make_controller("lqr", params)
+    ctrl.reset()
+    obs = sim.reset(0)
+    seen = {}
+    while obs is not None:
+        cmd = ctrl.step(obs)
+        near = any(math.hypot(o.x - pillar.x, o.y - pillar.y) < 0.3 for o in obs.obstacles)
+        seen.setdefault(cmd.estimate is None, []).append(near)
+        obs = sim.step(cmd)
+    assert seen[True] and all(seen[True][2:])   # lost: the pillar is there (after one scan)

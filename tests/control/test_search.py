@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from companion import metrics
-from companion.control.search import search_goal
+from companion.control.search import Search, search_goal
 from companion.params import REALISTIC, Params
 from companion.sim.faults import faults_from_list
 from companion.sim.person import line
 from companion.sim.runner import EpisodeSpec, run_one
-from companion.types import Circle, PersonEstimate, PersonState
+from companion.types import Circle, PersonEstimate, PersonState, Pose
 
 #: The detector goes silent from 5 to 12 s while the person walks on at 1 m/s.
 SILENT = faults_from_list([{"kind": "person_dropout", "start": 5.0, "end": 12.0}], "test")
@@ -81,3 +81,35 @@ def test_the_search_stops_short_of_an_obstacle_in_its_way():
     log, _ = _run(obstacles=(pillar,), max_time_s=15.0)
     assert _phases(log)
     assert np.nanmin(log["rho_ob"]) > 0.0
+
+
+def _searching(t, robot, v_now=0.0, **search):
+    """The command of a search begun at t = 0 for a person last seen at the origin walking
+    along +x at 1 m/s."""
+    p = Params()
+    p = p.replace(search=dataclasses.replace(p.search, **search))
+    state = PersonState(0.0, 0.0, 0.0, 1.0, 0.0)
+    s = Search(p)
+    s.begin(0.0, Pose(0.0, -3.0, 0.0), PersonEstimate(state, 0.05, np.eye(5), 0.0, "seen", state))
+    return s.target(t, robot, (), v_now)
+
+
+def test_the_search_looks_where_the_person_would_be_by_now():
+    """At first where the person was going (horizon_s on), later where they would be by now:
+    a robot at x = 3.5 turns back to x = 2 one second in, and drives on to x = 6 six
+    seconds in."""
+    ahead = Pose(3.5, 0.0, 0.0)
+    v, _, phase = _searching(1.0, ahead)
+    assert phase == "search_turn" and v == 0.0
+    v, _, phase = _searching(6.0, ahead)
+    assert phase == "search_approach" and v == pytest.approx(1.5)
+
+
+def test_the_search_stops_short_of_where_the_person_would_be():
+    """It never drives at full speed into the person it looks for: near where the prediction
+    puts them (6 s in: x = 6) its speed is the braking bound of a person standing there."""
+    v = [_searching(6.0, Pose(x, 0.0, 0.0), 1.5, horizon_s=0.0, arrive_m=0.1)[0]
+         for x in (2.0, 5.0, 5.6)]              # 4, 1 and 0.4 m from the predicted person
+    assert v[0] == pytest.approx(1.5)
+    assert 0.0 < v[1] < 1.4
+    assert v[2] == 0.0                           # inside the protective distance: no closer

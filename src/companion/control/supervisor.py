@@ -43,6 +43,7 @@ from companion.control.limits import limit
 from companion.control.rejoin import Rejoin
 from companion.control.search import Search
 from companion.control.slot import reference_point, slot_point
+from companion.control.stopping import stop_path_target
 from companion.geometry import unicycle_step, wrap_pi
 from companion.params import Params
 from companion.perception import MovingTracker, checked_scan
@@ -201,11 +202,15 @@ class SafetySupervisor:
                 requested = limit(target[:2], self._prev, p)
             target = keep_out(target, obs.robot, estimate, obstacles, velocity, run, reasons,
                               self._prev)
-        else:                             # searching: no person to keep out of; walkers
+        else:              # searching: no person to keep out of; walkers and the stop path
             way = give_way_target(obs.robot, velocity, target[:2], None, obstacles, run)
             if way is not None:
                 target = (*way, 0.0)
                 reasons.append("give_way")
+            way = stop_path_target(target[:2], obs.robot, velocity, self._prev, obstacles, run)
+            if way is not None:
+                target = (*way, 0.0)
+                reasons.append("stop_path")
         self._prev = limit(target[:2], self._prev, p)
         if fresh:
             self.delays.sent(obs.t, self._prev)

@@ -205,14 +205,17 @@ class SearchParams(Validated):
     max_time_s: float = param(10.0, "s", "how long the robot searches once it has stopped for "
                               "a lost person; 0: it holds where it stopped (no search)",
                               non_negative)
-    max_distance_m: float = param(3.0, "m", "how far from where it stopped it may go while "
+    max_distance_m: float = param(15.0, "m", "how far from where it stopped it may go while "
                                   "searching", non_negative)
-    speed: float = param(0.3, "m/s", "top speed towards where the person was going, within "
-                         "the braking bounds of what it sees", positive)
-    turn_rate: float = param(0.6, "rad/s", "turn rate while facing that place and while "
+    speed: float = param(1.5, "m/s", "top speed towards where the person was going (at most "
+                         "robot.v_max), within the braking bounds of what it sees and of the "
+                         "person standing where they would be by now: faster than a walk, to "
+                         "catch up with a person who walks on", positive)
+    turn_rate: float = param(1.0, "rad/s", "turn rate while facing that place and while "
                              "scanning", positive)
     horizon_s: float = param(2.0, "s", "the person's last estimate, walked on at its "
-                             "velocity for this long, is where the search goes", non_negative)
+                             "velocity for this long (or for the time searched so far, once "
+                             "longer), is where the search goes", non_negative)
     arrive_m: float = param(1.0, "m", "the approach ends this close to that place; then the "
                             "robot turns on the spot", positive)
 

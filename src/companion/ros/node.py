@@ -290,8 +290,8 @@ class CompanionNode:
         if future:
             cmd = with_reasons(cmd, future)
         self.last = cmd
-        if cmd.estimate is not None:
-            self._seen = (cmd.estimate.state.x, cmd.estimate.state.y)
+        e = cmd.estimate         # the estimate hides the person from the LiDAR; lost: nothing
+        self._seen = None if e is None else (e.state.x, e.state.y)
         self._publish(now, robot, cmd)
         if self.view is not None and self.last is cmd and not self._announced:
             self._announced = True

@@ -297,8 +297,8 @@ class Simulator:
                                 self._cmd.estimate, bearing=self._cmd.bearing)
         cmd = self._cmd
         e = cmd.estimate
-        if e is not None and self.detections:
-            self._seen = (e.state.x, e.state.y)
+        if self.detections:      # the estimate hides the person from the LiDAR; lost: nothing
+            self._seen = None if e is None else (e.state.x, e.state.y)
         est = _NO_ESTIMATE if e is None else (e.state.x, e.state.y, e.state.theta, e.state.v,
                                               e.state.omega, e.position_std)
         x, y, th, va, wa = self._x, self._y, self._th, self._va, self._wa
