@@ -21,6 +21,7 @@ from companion.geometry import (
     obstacle_arrays,
     offset_point,
     path_clearance,
+    point_clearances,
     unicycle_step,
     wrap_2pi,
     wrap_pi,
@@ -277,3 +278,5 @@ def test_min_clearance_is_the_smallest_clearance(x, y, circles, walls, footprint
     far = min_clearance(x + 10.0, y, arrays, footprint)
     assert path_clearance(np.array([x, x + 10.0]), np.array([y, y]), arrays,
                           footprint) == pytest.approx(min(want, far), abs=1e-12)
+    each = point_clearances(np.array([x, x + 10.0]), np.array([y, y]), arrays, footprint)
+    assert each.tolist() == pytest.approx([want, far], abs=1e-12)

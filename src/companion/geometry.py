@@ -260,6 +260,19 @@ def _path_clearance(xs: np.ndarray, ys: np.ndarray, obstacles: ObstacleArrays,
 path_clearance = kernel(_path_clearance)
 
 
+@jitable
+def _point_clearances(xs: np.ndarray, ys: np.ndarray, obstacles: ObstacleArrays,
+                      footprint: float) -> np.ndarray:
+    out = np.empty(xs.shape[0])
+    for i in range(xs.shape[0]):
+        out[i] = min_clearance(xs[i], ys[i], obstacles, footprint)
+    return out
+
+
+#: :func:`min_clearance` at each of the points ``(xs[i], ys[i])`` (compiled).
+point_clearances = kernel(_point_clearances)
+
+
 def major_std(cov: np.ndarray) -> float:
     """The square root of the largest eigenvalue of the 2x2 position block of ``cov``: the
     standard deviation (m) along the least certain direction (closed form, symmetrised)."""

@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from companion.control.planner import CELL, clearance_field, next_point, plan_way
-from companion.geometry import clearance, sweep_clear
+from companion.control.planner import CELL, next_point, plan_way
+from companion.geometry import clearance, obstacle_arrays, point_clearances, sweep_clear
 from companion.types import Circle, Wall
 
 DOOR = (Wall(15.0, -6.0, 15.0, -0.8), Wall(15.0, 0.8, 15.0, 6.0))
@@ -46,7 +46,7 @@ def test_the_way_through_a_door_keeps_the_footprint_and_ends_at_the_goal():
     assert way is not None
     assert math.dist(way[0], (14.5, 1.6)) <= CELL and math.dist(way[-1], (17.0, 1.0)) <= CELL
     xs, ys = np.array(way[1:]).T
-    assert clearance_field(xs, ys, DOOR).min() >= FOOTPRINT - 1e-9
+    assert point_clearances(xs, ys, obstacle_arrays(DOOR), 0.0).min() >= FOOTPRINT - 1e-9
     crossing = [y for (x0, y), (x1, _) in zip(way, way[1:]) if x0 <= 15.0 < x1]
     assert len(crossing) == 1 and abs(crossing[0]) <= 0.8 - FOOTPRINT + CELL
     steps = [math.dist(a, b) for a, b in zip(way, way[1:])]

@@ -21,8 +21,8 @@ from scipy.ndimage import distance_transform_edt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from companion.geometry import sweep_clear
-from companion.types import Circle, Obstacle
+from companion.geometry import obstacle_arrays, point_clearances, sweep_clear
+from companion.types import Obstacle
 
 #: Grid cell (m) and the room (m) round the start and the goal the grid covers.
 CELL, BORDER = 0.1, 3.0
@@ -33,24 +33,6 @@ ALONG_M, OFF_WAY_COST = 0.6, 2.0
 #: The 8 neighbours of a cell and their step lengths (in cells).
 _STEPS = [(di, dj, math.hypot(di, dj)) for di in (-1, 0, 1) for dj in (-1, 0, 1)
           if (di, dj) != (0, 0)]
-
-
-def clearance_field(xs: np.ndarray, ys: np.ndarray, obstacles: Sequence[Obstacle]
-                    ) -> np.ndarray:
-    """Distance (m) from each point ``(xs[k], ys[k])`` to the nearest obstacle's surface
-    (a wall: its centre-line; inf without obstacles)."""
-    out = np.full(xs.shape, np.inf)
-    for o in obstacles:
-        if isinstance(o, Circle):
-            d = np.hypot(xs - o.x, ys - o.y) - o.radius
-        else:
-            ex, ey = o.x1 - o.x0, o.y1 - o.y0
-            n2 = ex * ex + ey * ey
-            s = np.zeros_like(xs) if n2 == 0.0 else np.clip(
-                ((xs - o.x0) * ex + (ys - o.y0) * ey) / n2, 0.0, 1.0)
-            d = np.hypot(xs - o.x0 - s * ex, ys - o.y0 - s * ey)
-        np.minimum(out, d, out=out)
-    return out
 
 
 def plan_way(start: tuple[float, float], goal: tuple[float, float],
@@ -66,7 +48,8 @@ def plan_way(start: tuple[float, float], goal: tuple[float, float],
     nx = int(math.ceil((max(sx, gx) + border - x0) / cell)) + 1
     ny = int(math.ceil((max(sy, gy) + border - y0) / cell)) + 1
     xs, ys = np.meshgrid(x0 + cell * np.arange(nx), y0 + cell * np.arange(ny), indexing="ij")
-    clear = clearance_field(xs, ys, obstacles)
+    clear = point_clearances(xs.ravel(), ys.ravel(), obstacle_arrays(obstacles),
+                             0.0).reshape(xs.shape)
     si, sj = round((sx - x0) / cell), round((sy - y0) / cell)
     gi, gj = round((gx - x0) / cell), round((gy - y0) / cell)
     free = clear >= min(footprint, clear[si, sj])
