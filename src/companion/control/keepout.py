@@ -30,6 +30,7 @@ The safety supervisor applies them to the controller's target in this order (doc
    the person's braking interval. Rules 1-3 look along the current heading only, so a turn
    can outrun them; this one makes the obstacle side hold by construction.
 
+Without a person estimate (lost, while the robot searches) only giving way and rule 4 apply.
 Rules 1 and 3 change only ``v``, so the robot can always turn. The
 protective distance grows by ``keepout.uncertainty_sigmas`` standard deviations of where the
 person may be by the time the robot reacts (:func:`reaction_std`), and braking counts the
@@ -255,15 +256,27 @@ def risk_of(command: tuple[float, float], robot: Pose, v_now: tuple[float, float
         params.tracker.accel_std, r.radius + k.person_radius)
 
 
-def keep_out(target: tuple[float, float, float], robot: Pose, estimate: PersonEstimate,
-             obstacles: Sequence[Obstacle], v_now: tuple[float, float], params: Params,
-             reasons: list[str], prev: tuple[float, float] | None = None
-             ) -> tuple[float, float, float]:
+def keep_out(target: tuple[float, float, float], robot: Pose,
+             estimate: PersonEstimate | None, obstacles: Sequence[Obstacle],
+             v_now: tuple[float, float], params: Params, reasons: list[str],
+             prev: tuple[float, float] | None = None) -> tuple[float, float, float]:
     """The target ``(v, omega, u_ob)`` after rules 1-4 (module docstring) for the person
     ``estimate``; ``v_now`` is the robot's velocity now, ``prev`` the last command (None:
     ``v_now``). Appends "evasive", "give_way", "protective_zone" or "stop_path" to
-    ``reasons`` when they act."""
+    ``reasons`` when they act. Without an ``estimate`` (a lost person, while the robot
+    searches) there is no one to keep out of: only giving way and the stop path apply."""
     v, w, u_ob = target
+    last = v_now if prev is None else prev
+    if estimate is None:
+        evade = give_way_target(robot, v_now, (v, w), None, obstacles, params)
+        if evade is not None:
+            (v, w), u_ob = evade, 0.0
+            reasons.append("give_way")
+        stop = stop_path_target((v, w), robot, v_now, last, obstacles, params)
+        if stop is not None:
+            (v, w), u_ob = stop, 0.0
+            reasons.append("stop_path")
+        return v, w, u_ob
     person = estimate.state
     grow = params.keepout.uncertainty_sigmas * reaction_std(estimate, reaction_delay(params))
     v = barrier_speed(v, robot, person, obstacles, params)
@@ -285,8 +298,7 @@ def keep_out(target: tuple[float, float, float], robot: Pose, estimate: PersonEs
     allowed = person_interval(robot, person, params, reasons, grow, v_now[0])
     v = clip_to(v, [allowed, *obstacle_bounds(robot, obstacles, params, v_now[0])],
                 params.robot.v_max)
-    stop = stop_path_target((v, w), robot, v_now, v_now if prev is None else prev, obstacles,
-                            params, allowed)
+    stop = stop_path_target((v, w), robot, v_now, last, obstacles, params, allowed)
     if stop is not None:
         (v, w), u_ob = stop, 0.0
         reasons.append("stop_path")

@@ -17,8 +17,8 @@ and the person estimate. Per call:
    effect (the actuator lag on), the same for every controller;
 5. keep-out rules, with the protective distance grown by the person's uncertainty, the last
    of them checking the command as the rate limits will send it against the last command
-   (:func:`companion.control.keepout.keep_out`); while searching, giving way to walkers only
-   (:func:`companion.control.evasive.give_way_target`);
+   (:func:`companion.control.keepout.keep_out`); while searching for a lost person, giving
+   way to walkers and the stop path only;
 6. rate and velocity limits (:func:`companion.control.limits.limit`); a stopped robot's target
    is zero, so it brakes at the limits.
 
@@ -36,14 +36,12 @@ from collections.abc import Callable
 from companion.control import checks
 from companion.control.base import Controller, saturate
 from companion.control.delays import DelayMeter
-from companion.control.evasive import give_way_target
 from companion.control.formation import FormationPolicy
 from companion.control.keepout import keep_out
 from companion.control.limits import limit
 from companion.control.rejoin import Rejoin
 from companion.control.search import Search
 from companion.control.slot import reference_point, slot_point
-from companion.control.stopping import stop_path_target
 from companion.geometry import unicycle_step, wrap_pi
 from companion.params import Params
 from companion.perception import MovingTracker, checked_scan
@@ -196,21 +194,13 @@ class SafetySupervisor:
             target = (0.0, 0.0, 0.0)
             self._inner_fresh = True
             self._far_since = None    # a stop restarts the slot-error clock
-        elif not lost:                    # the keep-out: the controller's or a rejoin's
-            self._check_slot(obs.robot, estimate, reasons)
+        else:          # the keep-out: the controller's, a rejoin's or (lost) a search's
+            if not lost:
+                self._check_slot(obs.robot, estimate, reasons)
             if stepped:
                 requested = limit(target[:2], self._prev, p)
             target = keep_out(target, obs.robot, estimate, obstacles, velocity, run, reasons,
                               self._prev)
-        else:              # searching: no person to keep out of; walkers and the stop path
-            way = give_way_target(obs.robot, velocity, target[:2], None, obstacles, run)
-            if way is not None:
-                target = (*way, 0.0)
-                reasons.append("give_way")
-            way = stop_path_target(target[:2], obs.robot, velocity, self._prev, obstacles, run)
-            if way is not None:
-                target = (*way, 0.0)
-                reasons.append("stop_path")
         self._prev = limit(target[:2], self._prev, p)
         if fresh:
             self.delays.sent(obs.t, self._prev)
