@@ -69,3 +69,21 @@ def test_outside_a_corridor_wall_it_goes_back_the_persons_way_not_over_the_unsee
     assert walked.active and omega < 0.0                   # right, down into the mouth
     _, omega = _rejoin().target(robot, person, slot, seen, 0.0)
     assert omega > 0.0                                     # without it: left, over the top
+
+
+def test_a_walker_standing_in_the_opening_is_passed_on_the_free_side():
+    # on its way round the door's edge, the robot is in the door's lower half and a walker
+    # stopped face to face with it beyond the door (the crowds-robot doorway, seed 14):
+    # planned round like a pillar, the robot turns to the upper half; a walker who walks is
+    # the keep-out's to give way to, not planned round
+    robot, slot = Pose(14.78, -0.31, 0.0), (19.5, 0.9)
+    person = dataclasses.replace(PERSON, x=19.5, y=-0.1)
+    standing = Circle(15.3, -0.6, 0.25)
+    turns = []
+    for seen in (DOOR, (*DOOR, standing), (*DOOR, dataclasses.replace(standing, vx=-1.0))):
+        rejoin = _rejoin()
+        rejoin.active = True
+        turns.append(rejoin.target(robot, person, slot, seen, 0.0))
+    (_, free), (v, round_it), (_, passing) = turns
+    assert v == 0.0 and round_it > free + 0.5        # turns left on the spot, to the free half
+    assert passing == free

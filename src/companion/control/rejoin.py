@@ -27,7 +27,7 @@ from companion.control.planner import next_point
 from companion.control.search import drive_to
 from companion.geometry import sweep_clear
 from companion.params import Params
-from companion.types import Obstacle, PersonState, Pose
+from companion.types import Circle, Obstacle, PersonState, Pose
 
 #: Distance (m) between the points kept of the person's way, and how much of it is kept.
 SPACING, LENGTH = 0.25, 15.0
@@ -37,6 +37,17 @@ SPEED_GAIN, MIN_SPEED, FACING = 1.5, 0.3, 0.8
 #: Room (m) beyond the footprint the straight way to the slot needs before a rejoin ends,
 #: and the way round keeps (so that it does not run along the keep-out's obstacle barrier).
 RELEASE, MARGIN = 0.3, 0.05
+#: Circles slower than this (m/s) within this (m) of the robot are planned round.
+STANDING, NEAR = 0.3, 2.0
+
+
+def standing_near(robot: Pose, obstacles: Sequence[Obstacle]) -> list[Obstacle]:
+    """The circles (not wall pieces) within :data:`NEAR` m of the robot that stand (slower
+    than :data:`STANDING` m/s): a walker stopped in the way is planned round like a pillar;
+    one who walks is the keep-out's to give way to."""
+    return [o for o in obstacles if isinstance(o, Circle) and not o.piece
+            and math.hypot(o.vx, o.vy) < STANDING
+            and math.hypot(o.x - robot.x, o.y - robot.y) - o.radius < NEAR]
 
 
 class Rejoin:
@@ -71,8 +82,9 @@ class Rejoin:
             return None
         goals = [slot] + [(x, y) for x, y in reversed(self._trail)
                           if math.hypot(x - person.x, y - person.y) >= p.formation.distance]
+        around = walls + standing_near(robot, obstacles)
         for goal in goals[:3]:
-            point = next_point((robot.x, robot.y), goal, walls, r + MARGIN, self._trail)
+            point = next_point((robot.x, robot.y), goal, around, r + MARGIN, self._trail)
             if point is not None:
                 break
         else:
