@@ -9,7 +9,9 @@ move straight to its slot past the walls (walls and LiDAR wall pieces,
 :func:`companion.geometry.sweep_clear`; once on its way round, until that way has
 :data:`RELEASE` m more room, so that the controller's curve to the slot does not clip the
 corner it just rounded), :class:`Rejoin` plans the shortest way round them
-(:func:`companion.control.planner.plan_way`), keeping to the person's own way (kept every
+(:func:`companion.control.planner.plan_way`) and the circles that stand near it
+(:func:`standing_near`: a walker and the robot stopped face to face in an opening would
+each wait for the other), keeping to the person's own way (kept every
 :data:`SPACING` m, the last :data:`LENGTH` m) where it can, to the slot, or where the slot
 itself is walled in, to the latest point of the person's way at least the formation
 distance behind the person, and drives along it (:func:`companion.control.planner.next_point`,
