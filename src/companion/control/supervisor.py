@@ -161,23 +161,23 @@ class SafetySupervisor:
                                velocity if measured else None)
         if measured and not self._started:   # rate limits start from the measured velocity
             self._prev, self._started = saturate(*velocity, self.params.robot), True
-        searching = None      # (v, omega, reasons) of a search or a rejoin: not the controller
+        manoeuvre = None      # (v, omega, reason) of a search or a rejoin: not the controller
         if lost and not stop:
-            searching = self._searching(obs, obstacles, velocity) if fresh else None
-            stop = "" if searching is not None else "person_lost"
+            manoeuvre = self._searching(obs, obstacles, velocity) if fresh else None
+            stop = "" if manoeuvre is not None else "person_lost"
         elif not stop and fresh and estimate is not None and p.formation.policy == "adaptive":
             way = self._rejoin.target(obs.robot, estimate.walker, slot_point(estimate.walker, p),
                                       obstacles, velocity[0])
-            searching = None if way is None else (*way, "rejoin")
+            manoeuvre = None if way is None else (*way, "rejoin")
         run = self.delays.params(p) if p.supervisor.delays == "measured" else p
 
         stepped = False
         target = (*self._prev, 0.0)
         if odometry:
             self._inner_fresh = True  # the controller's filters knew the pose before it
-        if searching is not None:
-            target = (searching[0], searching[1], 0.0)
-            reasons += ["person_lost", searching[2]] if lost else [searching[2]]
+        if manoeuvre is not None:
+            target = (manoeuvre[0], manoeuvre[1], 0.0)
+            reasons += ["person_lost", manoeuvre[2]] if lost else [manoeuvre[2]]
             self._inner_fresh = True      # the controller's filters knew the person before
         elif not stop and fresh and not odometry:
             if self._inner_fresh:
