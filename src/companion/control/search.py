@@ -75,11 +75,11 @@ class Search:
         s, p = self.params.search, self.params
         if self._last is None or self.over:
             return None
-        if t - self._t0 > s.max_time_s or math.hypot(robot.x - self._from[0],
-                                                     robot.y - self._from[1]) > s.max_distance_m:
+        searched = t - self._t0
+        if searched > s.max_time_s or math.hypot(robot.x - self._from[0],
+                                                 robot.y - self._from[1]) > s.max_distance_m:
             self.over = True
             return None
-        searched = t - self._t0
         goal = search_goal(self._last, max(s.horizon_s, searched))
         if math.hypot(goal[0] - robot.x, goal[1] - robot.y) <= s.arrive_m:
             return 0.0, self._scan * s.turn_rate, "search_scan"
