@@ -12,47 +12,46 @@ from companion.params import REALISTIC, Params
 from companion.sim.episode import Simulator, run_episode
 from companion.sim.faults import Fault
 from companion.sim.person import Figure8, line
+from companion.sim.recorder import Recorder
 from companion.sim.scenario import load_scenario
 from companion.sim.sensing import make_perception
-from companion.types import LOG_COLUMNS, Circle, Command
+from companion.types import Circle, Command
 
 P = Params(sensing=REALISTIC)
 FAULTS = (Fault("stall", 2.0, 3.2), Fault("person_dropout", 4.0, 4.3))
 
 
 def _by_hand(seed, controller="lqr", duration=6.0):
+    """Step the simulator and the stack from outside and record the log as the runner does:
+    the first observation, the log and the simulator."""
     ctrl = make_controller(controller, P)
     sim = Simulator(Figure8(), P, duration, faults=FAULTS)
     ctrl.reset()
     obs = sim.reset(seed)
     ctrl.applied(Command(*sim.start_velocity))
-    rows, first = [], obs
+    recorder, first = Recorder(P, sim.steps), obs
     while obs is not None:
-        obs = sim.step(None if sim.stalled else ctrl.step(obs))
-        rows.append(sim.row)
-    return first, rows, sim
+        cmd = None if sim.stalled else ctrl.step(obs)
+        obs = sim.step(cmd)
+        recorder.add(sim.sample, None if cmd is None else ctrl.report)
+    return first, recorder.log(), sim
 
 
 def test_stepping_by_hand_is_the_episode_runner():
     """The same controller stepped from outside gives the runner's log, row for row
     (realistic sensing, a stall and a dropout)."""
-    _, rows, sim = _by_hand(4)
+    _, log_by_hand, sim = _by_hand(4)
     log = run_episode(make_controller("lqr", P), Figure8(), P, 6.0, seed=4, faults=FAULTS)
-    assert len(rows) == sim.steps == len(log)
-    numbers = np.array([r[0] for r in rows])
-    for i, name in enumerate(LOG_COLUMNS):
-        np.testing.assert_array_equal(numbers[:, i], log[name], err_msg=name)
-    assert [r[1] for r in rows] == list(log["status"])
-    assert [r[2] for r in rows] == list(log["reason"])
+    assert len(log_by_hand) == sim.steps == len(log)
+    assert log_by_hand.equals(log)
 
 
 def test_reset_with_a_seed_repeats_the_episode_and_other_seeds_differ():
-    first_a, rows_a, sim = _by_hand(7)
-    first_b, rows_b, _ = _by_hand(7)
-    _, rows_c, _ = _by_hand(8)
+    first_a, log_a, sim = _by_hand(7)
+    first_b, log_b, _ = _by_hand(7)
+    _, log_c, _ = _by_hand(8)
     assert first_a.detections == first_b.detections
-    assert [r[0] for r in rows_a] == [r[0] for r in rows_b]
-    assert [r[0] for r in rows_a] != [r[0] for r in rows_c]
+    assert log_a.equals(log_b) and not log_a.equals(log_c)
     with pytest.raises(RuntimeError, match="episode is over"):
         sim.step(None)
     again = sim.reset(7)                   # the same simulator object starts over
@@ -63,9 +62,8 @@ def test_a_stalled_controller_holds_then_the_base_brakes():
     """No command from t = 2 s to 3.2 s: the last stays in force for the base's command
     timeout (0.5 s; the log shows it held), then the base brakes at the deceleration limit,
     logged as stopped: command_timeout with the command the base executes."""
-    _, rows, _ = _by_hand(1)
-    col = {name: np.array([r[0][i] for r in rows]) for i, name in enumerate(LOG_COLUMNS)}
-    reason = np.array([r[2] for r in rows])
+    _, col, _ = _by_hand(1)
+    reason = col["reason"]
     t, v, robot_v = col["t"], col["v"], col["robot_v"]
     timeout = P.robot.command_timeout_s
     held = (t >= 2.0) & (t < 2.0 - P.dt + timeout - 1e-9)
@@ -110,7 +108,7 @@ def test_two_controllers_on_one_seed_see_the_same_detections_with_the_lidar_on()
         while obs is not None:
             seen[name].append(obs.detections)
             obs = sim.step(ctrl.step(obs))
-            paths[name].append(sim.row[0][1:3])
+            paths[name].append((sim.sample.robot.x, sim.sample.robot.y))
     assert sum(len(d) for d in seen["lqr"]) > 150
     assert seen["lqr"] == seen["pid"]
     np.testing.assert_array_equal(scans["lqr"].ranges, scans["pid"].ranges)
@@ -133,7 +131,8 @@ def test_a_lost_person_hides_nothing_from_the_lidar():
     seen = {}
     while obs is not None:
         cmd = ctrl.step(obs)
-        near = any(math.hypot(o.x - pillar.x, o.y - pillar.y) < 0.3 for o in obs.obstacles)
-        seen.setdefault(cmd.estimate is None, []).append(near)
+        known = ctrl.report.obstacles
+        near = any(math.hypot(o.x - pillar.x, o.y - pillar.y) < 0.3 for o in known)
+        seen.setdefault(ctrl.report.estimate is None, []).append(near)
         obs = sim.step(cmd)
     assert seen[True] and all(seen[True][2:])   # lost: the pillar is there (after one scan)

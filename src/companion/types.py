@@ -133,7 +133,8 @@ class Scan:
     ``angles`` (rad, robot frame, increasing) and ``ranges`` (m) have one entry per beam;
     a range is ``inf`` where nothing was hit and NaN where the return is invalid
     (as in ROS REP 117). ``range_min`` and ``range_max`` (m) are the sensor's limits, as in
-    sensor_msgs/LaserScan (``companion.perception.checked_scan`` reads a scan by them).
+    sensor_msgs/LaserScan (``companion.perception.checked_scan`` reads a scan by them). ``t``
+    (s) is the time it was taken (its stamp; NaN: unknown).
     """
 
     angles: np.ndarray
@@ -143,6 +144,7 @@ class Scan:
     theta: float
     range_min: float = 0.0
     range_max: float = math.inf
+    t: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -150,8 +152,10 @@ class Observation:
     """What the robot knows at one sample: time (s), robot pose, the person, the obstacles
     known at that time (world frame), the LiDAR scan they came from (None without a LiDAR),
     the robot's measured velocity ``(v, omega)`` from odometry (None: unknown), the person
-    detections that arrived since the last sample, the sources that are stale, and the time
-    of the odometry sample the velocity comes from (None: ``t``).
+    detections that arrived since the last sample, the sources that are stale, the time
+    of the odometry sample the velocity comes from (None: ``t``), and the formation in force
+    ``(distance, bearing)`` (m, rad; None: the controller's configured one), which a
+    formation policy changes while walking.
 
     The standard stack's input is the detections: its safety supervisor tracks the person
     from them and hands the layers inside it ``person``, the estimate. A ``person`` given to
@@ -169,28 +173,43 @@ class Observation:
     detections: tuple[PersonDetection, ...] = ()
     stale: tuple[str, ...] = ()
     robot_stamp: float | None = None
+    formation: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
 class Command:
-    """Robot input: linear velocity v (m/s) and angular velocity omega (rad/s).
+    """What the base receives: linear velocity v (m/s), angular velocity omega (rad/s) and
+    the stack's ``status`` ("ok", "degraded" or "stopped").
 
-    ``u_ob`` (rad/s) is the part of omega that obstacle avoidance added. ``status`` ("ok",
-    "degraded" or "stopped"), ``reason`` (empty when ok), ``estimate`` (the person estimate
-    the command was made for) and ``requested`` (the wrapped controller's ``(v, omega)``
-    within the rate limits, before the keep-out changed it; None without a controller step)
-    and ``bearing`` (the formation's bearing in force, rad, where a formation policy changed
-    it; None: the configured one) are set by the safety supervisor.
+    ``u_ob`` (rad/s) is the part of omega that obstacle avoidance added: a controller's
+    output that the controller is told back (``applied``); everything else the stack knows
+    about the step is in its :class:`StepReport`.
     """
 
     v: float
     omega: float
     u_ob: float = 0.0
     status: str = "ok"
+
+
+@dataclass(frozen=True)
+class StepReport:
+    """What the standard stack did in one step, beside the :class:`Command` it sent: the
+    ``status`` and ``reason`` (the reasons joined by "+", the stop first; empty when ok),
+    each ``(stage, reason)`` in the order the pipeline's stages raised them, the person
+    ``estimate`` the command was made for (None: lost), the controller's ``requested``
+    ``(v, omega)`` within the rate limits before the keep-out changed it (None without a
+    controller step), the formation's ``bearing`` in force (rad) and the ``obstacles`` the
+    stack knew (world frame). Logs, bags, the node's status topic and the simulator's
+    recorder read it."""
+
+    status: str = "ok"
     reason: str = ""
+    stages: tuple[tuple[str, str], ...] = ()
     estimate: PersonEstimate | None = None
     requested: tuple[float, float] | None = None
     bearing: float | None = None
+    obstacles: tuple[Obstacle, ...] = ()
 
 
 LOG_COLUMNS = ("t", "robot_x", "robot_y", "robot_theta", "person_x", "person_y",

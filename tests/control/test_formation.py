@@ -8,10 +8,12 @@ import numpy as np
 import pytest
 
 from companion import metrics
+from companion.control import LqrController, make_controller
 from companion.control.formation import BEARING_RATE, FormationPolicy, side_of, side_room
 from companion.params import BEHIND, LEFT, RIGHT, Params
 from companion.sim.crowd import Crowd
 from companion.sim.crowd_scenes import SCENES
+from companion.sim.episode import run_episode
 from companion.sim.person import circle, line
 from companion.sim.runner import EpisodeSpec, run_one
 from companion.sim.scenario import load_scenario
@@ -175,3 +177,19 @@ def test_a_robot_held_up_before_the_door_gets_through_round_the_wall(policy):
     k = int(np.argmax(log["robot_x"] > 15.0))                    # through the opening
     assert abs(log["robot_y"][k]) < 0.8 - p.robot.radius
     assert log["slot_error_m"][-1] < 0.3 and log["alpha_d"][-1] == pytest.approx(LEFT)
+
+
+def test_a_change_of_side_makes_no_controller_anew(monkeypatch):
+    """The bearing in force is an input of the controller's step (``Observation.formation``):
+    at the turnaround the side changes and no controller (nor its fallback Riccati solve at
+    construction) is made during the episode."""
+    p = _params("adaptive")
+    stack = make_controller("lqr", p)
+    inner = stack.inner
+    made = []
+    original = LqrController.__init__
+    monkeypatch.setattr(LqrController, "__init__",
+                        lambda self, params: (made.append(params), original(self, params))[1])
+    log = run_episode(stack, Crowd(SCENES["turnaround"], 0, dt=p.dt), p, 35.0)
+    assert log["alpha_d"][0] == pytest.approx(LEFT) and log["alpha_d"][-1] == pytest.approx(RIGHT)
+    assert stack.inner is inner and made == []

@@ -10,6 +10,7 @@ from companion.control import make_controller
 from companion.geometry import unicycle_step
 from companion.params import Params
 from companion.types import Circle, Observation, PersonDetection, PersonState, Pose
+from stepping import step
 
 WALKER_SPEED = 1.2
 
@@ -27,7 +28,7 @@ def closest_gap(params: Params, walker_y: float = 1.0, duration: float = 5.0
         t = k * params.dt
         walker = Circle(4.0 - WALKER_SPEED * t, walker_y, 0.25, vx=-WALKER_SPEED)
         gap = min(gap, math.hypot(walker.x - x, walker.y - y) - 0.25 - params.robot.radius)
-        cmd = stack.step(Observation(t, Pose(x, y, th), person, (walker,), None, (v, w)))
+        cmd = step(stack, Observation(t, Pose(x, y, th), person, (walker,), None, (v, w)))
         reasons.append(cmd.reason)
         v, w = cmd.v, cmd.omega
         x, y, th = unicycle_step(x, y, th, v, w, params.dt)
@@ -77,7 +78,7 @@ def test_another_person_on_the_person_topic_is_given_way_to():
         bx = 4.0 - WALKER_SPEED * t
         seen = (PersonDetection(t, 0.0, 0.0, covariance=(1e-4, 0.0, 0.0, 1e-4)),
                 PersonDetection(t, bx, 1.0, covariance=(1e-4, 0.0, 0.0, 1e-4)))
-        cmd = stack.step(Observation(t, Pose(x, y, th), None, (), None, (v, w), seen))
+        cmd = step(stack, Observation(t, Pose(x, y, th), None, (), None, (v, w), seen))
         gap = min(gap, math.hypot(bx - x, 1.0 - y) - p.movers.person_radius - p.robot.radius)
         reasons.append(cmd.reason)
         if cmd.estimate is not None:
@@ -93,7 +94,7 @@ def test_another_person_on_the_person_topic_is_given_way_to():
 def test_a_walker_with_a_broken_velocity_is_dropped_and_reported(bad):
     stack = make_controller("lqr", Params())
     walker = Circle(2.0, 1.0, 0.25, vx=bad)
-    cmd = stack.step(Observation(0.0, Pose(-0.25, 1.0, 0.0), PersonState(0.0, 0.0, 0.0, 1.0, 0.0),
+    cmd = step(stack, Observation(0.0, Pose(-0.25, 1.0, 0.0), PersonState(0.0, 0.0, 0.0, 1.0, 0.0),
                                  (walker,), None, (1.0, 0.0)))
     assert math.isfinite(cmd.v) and math.isfinite(cmd.omega)
     assert "obstacle_invalid" in cmd.reason.split("+")
@@ -113,7 +114,7 @@ def test_a_robot_searching_for_a_lost_person_gives_way_too():
                 if t < 1.0 else ()
             walker = Circle(7.0 - WALKER_SPEED * t, 1.0, 0.25, vx=-WALKER_SPEED)
             gap = min(gap, math.hypot(walker.x - x, walker.y - y) - 0.25 - p.robot.radius)
-            cmd = stack.step(Observation(t, Pose(x, y, th), None, (walker,), None, (v, w), seen))
+            cmd = step(stack, Observation(t, Pose(x, y, th), None, (walker,), None, (v, w), seen))
             reasons.append(cmd.reason)
             v, w = cmd.v, cmd.omega
             x, y, th = unicycle_step(x, y, th, v, w, p.dt)

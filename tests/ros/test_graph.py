@@ -13,6 +13,7 @@ from companion.ros.node import CompanionNode
 from companion.ros.settings import RosParams, config_from_mapping
 from companion.ros.transport import DEFAULT, SENSOR_DATA, Endpoint, MemoryBus, MemoryTransport
 from companion.types import PersonDetection, Pose
+from stepping import tick
 
 POSES = "geometry_msgs/msg/PoseArray"
 
@@ -75,7 +76,7 @@ def test_a_detector_of_another_type_is_named_on_status_and_rosout():
         odom(convert.odometry_msg(t, Pose(0, 0, 0), (0, 0), "odom", "base_link"))
         poses(convert.person_msg([PersonDetection(t, 1.0, 1.0, "odom")], "pose_array", t,
                                  "odom"))
-        cmd = node.tick(t)
+        cmd = tick(node, t)
     assert cmd.estimate is None
     status = sent(bus, ts, "/companion/status")[-1].status[0]
     values = {kv.key: kv.value for kv in status.values}
@@ -94,7 +95,7 @@ def test_auto_takes_any_person_type():
         odom(convert.odometry_msg(t, Pose(0, 0, 0), (0, 0), "odom", "base_link"))
         poses(convert.person_msg([PersonDetection(t, 1.0 + 0.05 * k, 1.0, "odom")],
                                  "pose_array", t, "odom"))
-        cmd = node.tick(t)
+        cmd = tick(node, t)
     assert cmd.estimate is not None and node.warnings == []
 
 
@@ -102,7 +103,7 @@ def test_the_node_logs_start_warnings_and_status_changes_to_rosout():
     bus, ts, node, other = rig()
     node.log.info("hello")
     for k in range(25):
-        node.tick(50.0 + 0.05 * k)                      # no odometry: stopped
+        tick(node, 50.0 + 0.05 * k)                      # no odometry: stopped
     logs = sent(bus, ts, "/rosout")
     assert [m.msg for m in logs][:2] == ["hello", "status stopped: odometry_stale"]
     assert logs[1].level == 30 and logs[0].stamp.sec > 0

@@ -22,6 +22,7 @@ from companion.ros.transport import MemoryBus, MemoryTransport
 from companion.sim.runner import run_one
 from companion.sim.scenario import load_scenario
 from companion.types import PersonDetection, Pose, Scan
+from stepping import tick
 
 
 def graph():
@@ -40,7 +41,7 @@ def lockstep(sensing: str, person_type: str, duration: float, scenario: str = "f
     node = CompanionNode(cfg, transport())
     spec = dataclasses.replace(sc.episode(), duration=duration)
     log, robot = run_sim_robot(spec, transport(), cfg.ros, Pacer(0.0),
-                               after=lambda t: node.tick(t) if t < silent_from - 1e-9 else None)
+                               after=lambda t: tick(node, t) if t < silent_from - 1e-9 else None)
     return spec, log, robot, bus
 
 
@@ -93,12 +94,12 @@ def test_stale_odometry_stops_the_robot_and_fresh_odometry_resumes():
         t = 100.0 + 0.05 * k
         send_odom(odom(t, 0.05 * k, 0.0, 0.0, 1.0))
         send_person(person(t, 0.05 * k + 0.3, 1.0))
-        cmd = node.tick(t)
+        cmd = tick(node, t)
     assert cmd.status == "ok", cmd.reason
     for k in range(40, 60):                   # odometry stops, detections go on
         t = 100.0 + 0.05 * k
         send_person(person(t, 0.05 * k + 0.3, 1.0))
-        cmd = node.tick(t)
+        cmd = tick(node, t)
     assert cmd.status == "stopped" and cmd.reason.startswith("odometry_stale")
     assert cmd.v == pytest.approx(0.0, abs=1e-9)
     last = statuses(bus)[-1]
@@ -107,7 +108,7 @@ def test_stale_odometry_stops_the_robot_and_fresh_odometry_resumes():
         t = 100.0 + 0.05 * k
         send_odom(odom(t, 2.0, 0.0, 0.0))
         send_person(person(t, 0.05 * k + 0.3, 1.0))
-        cmd = node.tick(t)
+        cmd = tick(node, t)
     assert "odometry_stale" not in cmd.reason and cmd.status != "stopped"
 
 
@@ -134,7 +135,7 @@ def test_no_scan_for_longer_than_its_timeout_stops_the_robot():
         send_person(person(t, 0.0, 1.0))
         if k < 10:
             send_scan(scan(t, empty, "laser", 0.1))
-        reasons.append(node.tick(t).reason)
+        reasons.append(tick(node, t).reason)
     assert "scan_stale" not in reasons[9]
     assert all("scan_stale" in r for r in reasons[17:])    # 0.3 s after the last scan at 5.45
 
@@ -215,7 +216,7 @@ def test_odometry_and_scans_from_the_future_are_dropped_with_a_reason():
             send_scan(convert.scan_msg(t, empty, "laser", 0.1))
         if k == 10:
             send_scan(convert.scan_msg(t + 5.0, empty, "laser", 0.1))
-        cmds.append(node.tick(t))
+        cmds.append(tick(node, t))
     assert "scan_future" in cmds[10].reason.split("+") and cmds[10].status != "ok"
     assert "odometry_future" in cmds[12].reason.split("+") and cmds[12].status != "ok"
     assert "odometry_future" not in cmds[13].reason
@@ -231,13 +232,13 @@ def test_a_node_that_ticked_before_any_odometry_starts_from_the_robots_velocity(
     def run(tick_at_zero: bool) -> list[tuple[float, float]]:
         bus, node, send_odom, send_person = node_on_bus()
         if tick_at_zero:
-            assert node.tick(0.0).reason.startswith("odometry_stale")
+            assert tick(node, 0.0).reason.startswith("odometry_stale")
         out = []
         for k in range(1, 21):
             t = 0.05 * k
             send_odom(odom(t, 1.0 * t, 0.0, 0.0, 1.0))
             send_person(person(t, 1.0 * t + 0.2, 1.0))
-            cmd = node.tick(t)
+            cmd = tick(node, t)
             out.append((cmd.v, cmd.omega))
         return out
 
@@ -294,19 +295,20 @@ def test_the_robot_logs_the_nodes_estimate_and_the_status_its_measured_delays():
     assert np.median(log["estimate_error_m"][seen]) < 0.2
     m = metrics.compute(log)
     assert m["rms_estimate_error_m"] is not None and m["rms_tracking_error_m"] is not None
-    cmd = convert.status_msg(1.0, robot_command(), None, delays=(0.125, 0.2))
+    cmd = convert.status_msg(1.0, *robot_command(), None, delays=(0.125, 0.2))
     values = {kv.key: kv.value for kv in cmd.status[0].values}
     assert float(values["latency_measured_s"]) == 0.125
     assert float(values["actuator_tau_measured_s"]) == 0.2
     back = convert.estimate_of(cmd)
     assert back is not None and back.state.x == pytest.approx(1.5)
-    assert convert.estimate_of(convert.status_msg(1.0, robot_command(None), None)) is None
+    assert convert.estimate_of(convert.status_msg(1.0, *robot_command(None), None)) is None
 
 
 def robot_command(estimate=...):
-    from companion.types import Command, PersonEstimate, PersonState
+    """A command and its step report with ``estimate`` (default: one)."""
+    from companion.types import Command, PersonEstimate, PersonState, StepReport
 
     if estimate is ...:
         s = PersonState(1.5, 2.0, 0.3, 1.0, 0.1)
         estimate = PersonEstimate(s, 0.05, np.zeros((5, 5)), 0.0, "seen", s)
-    return Command(0.5, 0.1, 0.0, "ok", "", estimate)
+    return Command(0.5, 0.1), StepReport(estimate=estimate)

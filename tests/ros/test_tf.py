@@ -18,6 +18,7 @@ from companion.ros.settings import config_from_mapping
 from companion.ros.tf import Lookup, Transform, TransformBuffer
 from companion.ros.transport import MemoryBus, MemoryTransport
 from companion.types import PersonDetection, Pose
+from stepping import tick
 
 
 def tf(x=0.0, y=0.0, z=0.0, yaw=0.0, rotation=None):
@@ -125,7 +126,7 @@ def test_a_transform_that_comes_late_is_waited_for_within_the_bound():
         if k >= 2:                  # the camera's pose comes 0.1 s behind the detections
             tf_pub(make("tf2_msgs/msg/TFMessage", transforms=[transform_msg(
                 "odom", "fixed_cam", t - 0.1, 5.0, 0.0, 0.0, (0, 0, 0, 1))]))
-        cmd = node.tick(t)
+        cmd = tick(node, t)
         reasons.append(cmd.reason)
         placed.append(cmd.estimate)
     assert placed[-1] is not None and placed[-1].state.x == pytest.approx(6.0, abs=0.05)
@@ -136,7 +137,7 @@ def test_a_transform_that_comes_late_is_waited_for_within_the_bound():
         odom2(convert.odometry_msg(t, Pose(0.0, 0.0, 0.0), (0, 0), "odom", "base_link"))
         point2(convert.person_msg([PersonDetection(t, 1.0, 0.0, "nowhere")], "point", t,
                                   "nowhere"))
-        cmd = node2.tick(t)
+        cmd = tick(node2, t)
     assert "detection_frame" in cmd.reason
     assert any("detections in frame nowhere cannot be placed" in w for w in node2.warnings)
 

@@ -221,7 +221,7 @@ def test_params_from_toml_mapping():
         with pytest.raises(ConfigError):
             build(LidarParams, bad)
     keys = {row[0] for row in field_docs(LidarParams)}
-    assert keys == {"fov", "range_max", "resolution", "noise_std", "person_radius"}
+    assert keys == {"fov", "range_max", "resolution", "noise_std", "person_radius", "timeout_s"}
     assert all(row[1] and row[3] for row in field_docs(LidarParams))
 
 

@@ -8,6 +8,7 @@ import pytest
 
 from companion import metrics
 from companion.control import make_controller
+from companion.perception import extract_obstacles
 from companion.sim.episode import run_episode
 from companion.sim.scenario import load_scenario
 from companion.sim.sensing import LidarPerception, make_perception
@@ -62,8 +63,10 @@ def test_lidar_perception_sees_the_obstacle_and_not_the_person():
     from companion.types import Pose
     robot = Pose(4.0, -1.8, 0.0)
     person = (4.0, -0.8)
-    seen = perc.obstacles(0, robot, sc.obstacles, person, person, rng)
+    known, scan = perc.sense(0, robot, sc.obstacles, person, rng)
+    assert known == () and scan.t == 0.0
+    seen = extract_obstacles(scan, person, p.extractor)
     assert len(seen) == 1
     assert (seen[0].x, seen[0].y) == pytest.approx((5.1, -1.8), abs=0.05)
     # held between scans (10 Hz at dt = 0.05 s: every 2nd step)
-    assert perc.obstacles(1, Pose(0, 0, 0), (), person, person, rng) == seen
+    assert perc.sense(1, Pose(0, 0, 0), (), person, rng) == ((), scan)

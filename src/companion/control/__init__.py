@@ -7,7 +7,6 @@ stack every one of them runs in: safety supervisor -> avoidance layer -> control
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -88,14 +87,12 @@ def make_controller(name: str, params: Params) -> SafetySupervisor:
     """The standard stack of the registered controller ``name``: the safety supervisor around
     the avoidance layer (the same module for every controller, as in the paper's Fig. 4)
     around the controller."""
-    return SafetySupervisor(avoiding(name, params), lookup(name).adjust(params),
-                            functools.partial(avoiding, name))
+    return SafetySupervisor(avoiding(name, params), lookup(name).adjust(params))
 
 
 def avoiding(name: str, params: Params) -> AvoidingController:
     """The avoidance layer around the registered controller ``name`` made for ``params``:
-    what the safety supervisor wraps (and makes anew when a formation policy changes the
-    bearing)."""
+    what the safety supervisor wraps."""
     entry = lookup(name)
     params = entry.adjust(params)
     return AvoidingController(entry.factory(params), params)

@@ -16,9 +16,10 @@ registered controller.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Protocol
 
-from companion.params import RobotParams
+from companion.params import Params, RobotParams
 from companion.types import Command, Observation
 
 
@@ -39,3 +40,15 @@ def saturate(v: float, omega: float, robot: RobotParams) -> tuple[float, float]:
     """Clip each input to its limit (|v| <= v_max, |omega| <= omega_max), componentwise."""
     return (min(max(v, -robot.v_max), robot.v_max),
             min(max(omega, -robot.omega_max), robot.omega_max))
+
+
+def in_force(params: Params, obs: Observation) -> Params:
+    """``params`` with the formation in force that ``obs`` carries (``Observation.formation``,
+    set by a formation policy while walking); ``params`` itself where it is the configured
+    one. The formation is an input of every step, so a change of side makes no controller
+    anew."""
+    f, given = params.formation, obs.formation
+    if given is None or given == (f.distance, f.bearing):
+        return params
+    return dataclasses.replace(params, formation=dataclasses.replace(
+        f, distance=given[0], bearing=given[1]))

@@ -8,7 +8,7 @@ docs/baselines.md gives the law and its tuning.
 
 from __future__ import annotations
 
-from companion.control.base import saturate
+from companion.control.base import in_force, saturate
 from companion.control.slot import (
     ActualVelocity,
     from_frame,
@@ -30,7 +30,8 @@ class ImpedanceController(ActualVelocity):
         self.reset()
 
     def step(self, obs: Observation) -> Command:
-        p, g = self.params, self.params.impedance
+        p = in_force(self.params, obs)
+        g = p.impedance
         r, h = obs.robot, obs.person
         d, dt, w = p.robot.d, p.dt, h.omega
         rx, ry = reference_point(r, d)

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion._jit import jitable, kernel
-from companion.control.base import saturate
+from companion.control.base import in_force, saturate
 from companion.errors import ConfigError
 from companion.geometry import wrap_pi
 from companion.model import discretize, euler, jacobians, relative_state, slot_reference
@@ -89,7 +89,7 @@ class LqrController:
         # heading mode is then uncontrollable in the linearisation) before any gain is known.
         # Solving once here also checks the weights: none that fail reach a step.
         try:
-            self._rest_gain = self.gain(*rest_operating_point(params))
+            self._rest_gains = {params.formation: self.gain(*rest_operating_point(params))}
         except np.linalg.LinAlgError:
             raise ConfigError(f"lqr.q, lqr.r: no stabilising LQR gain for the slot with "
                               f"q = {params.lqr.q}, r = {params.lqr.r} (every weight of q "
@@ -114,13 +114,23 @@ class LqrController:
         xi, gain, u_d, beta_d = self._last
         return LqrStep(xi.copy(), gain.copy(), u_d, beta_d)
 
-    def reference(self, v_h: float, omega_h: float) -> tuple[float, float, float]:
-        """``(beta_d, v_d, omega_d)`` of the configured feedforward for a person velocity."""
-        p = self.params
+    def reference(self, v_h: float, omega_h: float, params: Params | None = None
+                  ) -> tuple[float, float, float]:
+        """``(beta_d, v_d, omega_d)`` of the configured feedforward for a person velocity
+        (the formation of ``params``, default the configured one)."""
+        p = params or self.params
         if p.lqr.feedforward == "person":
             return 0.0, v_h, omega_h
         ref = slot_reference(v_h, omega_h, p.formation.distance, p.formation.bearing, p.robot.d)
         return ref.beta, ref.v, ref.omega
+
+    def rest_gain(self, params: Params) -> np.ndarray:
+        """The fallback gain for the formation of ``params`` (:func:`rest_operating_point`),
+        solved once per formation."""
+        f = params.formation
+        if f not in self._rest_gains:
+            self._rest_gains[f] = self.gain(*rest_operating_point(params))
+        return self._rest_gains[f]
 
     def gain(self, chi, u, w) -> np.ndarray:
         """LQR gain ``K`` (2, 5) of the model linearised at ``(chi, u, w)`` with the
@@ -133,10 +143,10 @@ class LqrController:
         return k
 
     def step(self, obs: Observation) -> Command:
-        p, r, h = self.params, obs.robot, obs.person
+        p, r, h = in_force(self.params, obs), obs.robot, obs.person
         rho_d, alpha_d = p.formation.distance, p.formation.bearing
         rho, alpha, beta = relative_state(r.x, r.y, r.theta, h.x, h.y, h.theta, p.robot.d)
-        beta_d, v_d, omega_d = self.reference(h.v, h.omega)
+        beta_d, v_d, omega_d = self.reference(h.v, h.omega, p)
         e_v, e_w = self._u_e
         if p.lqr.linearize_at == "desired":
             chi, u = (rho_d, alpha_d, beta_d), (v_d, omega_d)
@@ -147,7 +157,7 @@ class LqrController:
         if k is not None:
             self._gain = k
         elif self._gain is None:
-            self._gain = self._rest_gain
+            self._gain = self.rest_gain(p)
         c_rho, c_alpha, c_beta = p.lqr.error_clip
         xi = np.array((min(max(rho - rho_d, -c_rho), c_rho),
                        min(max(wrap_pi(alpha - alpha_d), -c_alpha), c_alpha),

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 
-from companion.control.base import saturate
+from companion.control.base import in_force, saturate
 from companion.control.slot import reference_point, slot_point, slot_velocity, to_frame
 from companion.geometry import wrap_pi
 from companion.model import slot_reference
@@ -40,7 +40,8 @@ class PidController:
         self._v_cut = 0                      # +1: outer layer lowered v, -1: raised it
 
     def step(self, obs: Observation) -> Command:
-        p, g = self.params, self.params.pid
+        p = in_force(self.params, obs)
+        g = p.pid
         r, h = obs.robot, obs.person
         d, f = p.robot.d, p.formation
         rx, ry = reference_point(r, d)

@@ -8,7 +8,7 @@ saturation and the base's lag cannot wind it up. docs/baselines.md gives the law
 
 from __future__ import annotations
 
-from companion.control.base import saturate
+from companion.control.base import in_force, saturate
 from companion.control.slot import (
     ActualVelocity,
     reference_point,
@@ -28,7 +28,8 @@ class VsmController(ActualVelocity):
         self.reset()
 
     def step(self, obs: Observation) -> Command:
-        p, g = self.params, self.params.vsm
+        p = in_force(self.params, obs)
+        g = p.vsm
         r, h = obs.robot, obs.person
         d = p.robot.d
         rx, ry = reference_point(r, d)

@@ -104,6 +104,11 @@ class Params(Validated):
                 f"sensing.person_rate_hz: expected at least 1 / tracker.lost_after_s "
                 f"({1.0 / tr.lost_after_s:g} Hz; the person would be lost between "
                 f"detections), got {s.person_rate_hz!r}")
+        if 1.0 / s.lidar_rate_hz >= self.lidar.timeout_s:
+            raise ConfigError(
+                f"sensing.lidar_rate_hz: expected more than 1 / lidar.timeout_s "
+                f"({1.0 / self.lidar.timeout_s:g} Hz; the obstacles would be dropped between "
+                f"scans), got {s.lidar_rate_hz!r}")
 
     def replace(self, **changes: Any) -> Params:
         """A copy with top-level fields replaced, validated."""

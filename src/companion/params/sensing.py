@@ -243,6 +243,8 @@ class LidarParams(Validated):
                              "every finite range (clipped at 0); 0 = exact", non_negative)
     person_radius: float = param(0.2, "m", "radius of the circle that stands for the person's "
                                  "body in the scan", positive)
+    timeout_s: float = param(1.0, "s", "a scan's obstacles are held until the next scan, at "
+                             "most this long (the perception front end)", positive)
 
 
 @dataclasses.dataclass(frozen=True)

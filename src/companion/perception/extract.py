@@ -207,8 +207,8 @@ def extract_obstacles(scan: Scan, person: tuple[float, float] | None,
         :func:`checked_scan` (an invalid scan gives no obstacles); ``inf`` and NaN ranges
         count as "no return".
     person : (float, float) or None
-        Tracked position of the person; circles centred near it are left out. ``None``
-        reports everything.
+        Tracked position of the person; circles centred near it are left out. ``None`` (or a
+        position that is not finite) reports everything.
     params : ExtractorParams
         Clustering, fitting and exclusion settings.
 
@@ -247,7 +247,7 @@ def extract_obstacles(scan: Scan, person: tuple[float, float] | None,
     out.sort(key=lambda item: item[0])             # stable: pieces stay in beam order
     circles = [Circle(c[0], c[1], r, influence, piece=influence is not None)
                for _, c, r, influence in out]
-    if person is not None:
+    if person is not None and math.isfinite(person[0]) and math.isfinite(person[1]):
         keep_out = params.person_radius + params.person_exclusion
         circles = [c for c in circles if math.hypot(c.x - person[0], c.y - person[1]) > keep_out]
     return circles

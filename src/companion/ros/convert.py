@@ -13,6 +13,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from companion.geometry import wrap_pi
+from companion.perception.front_end import OdometrySample
 from companion.ros.messages import make
 from companion.types import (
     Circle,
@@ -22,6 +23,7 @@ from companion.types import (
     PersonState,
     Pose,
     Scan,
+    StepReport,
 )
 
 
@@ -61,15 +63,6 @@ class TimeBase(NamedTuple):
 
 #: Stamps as they are: seconds since 1970 (the recorder's log times, companion run's bags).
 ABSOLUTE = TimeBase(0)
-
-
-class OdometrySample(NamedTuple):
-    """One odometry message: time (s), the robot pose in the odometry frame, its velocity
-    ``(v, omega)`` in the robot frame."""
-
-    t: float
-    pose: Pose
-    velocity: tuple[float, float]
 
 
 def time_msg(t: float, tb: TimeBase = ABSOLUTE) -> Any:
@@ -119,13 +112,14 @@ def odometry_sample(msg: Any, tb: TimeBase = ABSOLUTE) -> OdometrySample:
                           (tw.linear.x, tw.angular.z))
 
 
-def scan_from(msg: Any, sensor: Pose) -> Scan:
-    """A sensor_msgs/LaserScan taken from the sensor pose ``sensor`` (world frame), as a
-    :class:`Scan`; it is read by :func:`companion.perception.checked_scan` later."""
+def scan_from(msg: Any, sensor: Pose, t: float = math.nan) -> Scan:
+    """A sensor_msgs/LaserScan stamped ``t`` (s) taken from the sensor pose ``sensor``
+    (world frame), as a :class:`Scan`; it is read by :func:`companion.perception.checked_scan`
+    later."""
     ranges = np.asarray(msg.ranges, dtype=float)
     angles = msg.angle_min + msg.angle_increment * np.arange(ranges.size)
     return Scan(angles, ranges, sensor.x, sensor.y, sensor.theta, float(msg.range_min),
-                float(msg.range_max))
+                float(msg.range_max), t)
 
 
 PERSON_TYPES = {"point": "geometry_msgs/msg/PointStamped",
@@ -265,22 +259,25 @@ def clock_msg(t: float, tb: TimeBase = ABSOLUTE) -> Any:
 LEVELS = {"ok": 0, "degraded": 1, "stopped": 2}   # DiagnosticStatus OK, WARN, ERROR
 
 
-def status_msg(t: float, cmd: Command, errors: tuple[float, float, float] | None,
+def status_msg(t: float, cmd: Command, report: StepReport,
+               errors: tuple[float, float, float] | None,
                name: str = "companion", tb: TimeBase = ABSOLUTE,
                warnings: Sequence[str] = (),
                delays: tuple[float | None, float | None] = (None, None)) -> Any:
-    """diagnostic_msgs/DiagnosticArray: the supervisor's status (OK, WARN for degraded, ERROR
-    for stopped) and reason, the command, the relative state ``(rho, alpha, beta)`` to the
-    person estimate and the estimate itself, the measured detection latency and actuator lag
-    (``delays``, s; absent until measured), as key-value pairs (SI units); the node's active
-    ``warnings`` (a problem on its inputs) as ``warning`` and the message."""
-    values = {"status": cmd.status, "reason": cmd.reason, "v": cmd.v, "omega": cmd.omega}
+    """diagnostic_msgs/DiagnosticArray: the step's status (OK, WARN for degraded, ERROR for
+    stopped) and reason (its :class:`StepReport`), the command, the relative state ``(rho,
+    alpha, beta)`` to the person estimate and the estimate itself, the measured detection
+    latency and actuator lag (``delays``, s; absent until measured), as key-value pairs (SI
+    units); the node's active ``warnings`` (a problem on its inputs) as ``warning`` and the
+    message."""
+    values = {"status": report.status, "reason": report.reason, "v": cmd.v,
+              "omega": cmd.omega}
     for key, value in zip(("latency_measured_s", "actuator_tau_measured_s"), delays):
         if value is not None:
             values[key] = value
     if errors is not None:
         values.update(zip(("rho", "alpha", "beta"), errors))
-    e = cmd.estimate
+    e = report.estimate
     if e is not None:
         values.update(person_x=e.state.x, person_y=e.state.y, person_theta=e.state.theta,
                       person_v=e.state.v, person_omega=e.state.omega,
@@ -289,8 +286,9 @@ def status_msg(t: float, cmd: Command, errors: tuple[float, float, float] | None
         values["warning"] = " | ".join(warnings)
     pairs = [make("diagnostic_msgs/msg/KeyValue", key=k,
                   value=v if isinstance(v, str) else repr(float(v))) for k, v in values.items()]
-    message = " | ".join([cmd.reason or cmd.status, *warnings])
-    status = make("diagnostic_msgs/msg/DiagnosticStatus", level=LEVELS[cmd.status], name=name,
+    message = " | ".join([report.reason or report.status, *warnings])
+    status = make("diagnostic_msgs/msg/DiagnosticStatus", level=LEVELS[report.status],
+                  name=name,
                   message=message, values=pairs)
     return make("diagnostic_msgs/msg/DiagnosticArray", header=header(t, "", tb),
                 status=[status])

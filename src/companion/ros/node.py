@@ -30,7 +30,6 @@ from companion.control.avoidance import influence_range
 from companion.control.slot import slot_point
 from companion.geometry import unicycle_step, wrap_pi
 from companion.model import relative_state
-from companion.perception import LidarObstacles
 from companion.ros import convert, graph
 from companion.ros.convert import OdometrySample, TimeBase, person_types
 from companion.ros.parameters import ParameterServer
@@ -46,6 +45,8 @@ from companion.types import (
     PersonDetection,
     PersonEstimate,
     Pose,
+    Scan,
+    StepReport,
 )
 
 _NOWHERE = Pose(math.nan, math.nan, math.nan)
@@ -68,10 +69,12 @@ class View(NamedTuple):
     obstacles: tuple[tuple[Circle, float], ...]
 
 
-def with_reasons(cmd: Command, reasons: list[str]) -> Command:
-    """``cmd`` with the node's own ``reasons`` added (degraded if it was ok)."""
-    return dataclasses.replace(cmd, status="degraded" if cmd.status == "ok" else cmd.status,
-                               reason="+".join([cmd.reason] * bool(cmd.reason) + reasons))
+def with_reasons(report: StepReport, reasons: list[str]) -> StepReport:
+    """``report`` with the node's own ``reasons`` added (degraded if it was ok)."""
+    return dataclasses.replace(
+        report, status="degraded" if report.status == "ok" else report.status,
+        reason="+".join([report.reason] * bool(report.reason) + reasons),
+        stages=(*report.stages, *(("node", r) for r in reasons)))
 
 
 class CompanionNode:
@@ -92,14 +95,12 @@ class CompanionNode:
         self._step_lock = threading.Lock()                   # the stack: a tick or a retune
         self._odom: deque[OdometrySample] = deque()
         self._scans: list[tuple[float, float, Any]] = []     # (stamp, arrival, LaserScan)
-        self._scan_t = -math.inf                             # stamp of the last scan used
-        self._obstacles: tuple[Circle, ...] = ()
-        self._lidar = LidarObstacles(config.params.extractor, config.params.movers)
-        self._scan_seen: Any = None
+        self._scan_t = -math.inf                             # stamp of the last scan placed
+        self._scan_seen: Scan | None = None                  # the last scan placed
         self._people: list[tuple[PersonDetection, float]] = []       # (detection, arrival)
         self._sim_time: float | None = None
-        self._seen: tuple[float, float] | None = None
         self.last: Command | None = None
+        self.report = StepReport()                           # the last tick's step report
         self.view: View | None = None
         self.tf = TransformBuffer() if r.use_tf else None
         self.placer = Placer(r, self.tf)
@@ -276,27 +277,24 @@ class CompanionNode:
                                      *odom.velocity, lead)
             robot, velocity = Pose(x, y, wrap_pi(th)), odom.velocity
         detections = self._place_people(people, samples, now)
-        placed = [d for d in detections if d.frame == self.config.params.tracker.world_frame]
-        if placed:                # the newest detection, until the estimate, hides the person
-            self._seen = (placed[-1].x, placed[-1].y)      # from the LiDAR's obstacles
         for scan in scans:
-            self._use_scan(*scan, samples, now)
+            self._place_scan(*scan, samples, now)
         if r.topics.scan and now - self._scan_t > r.scan_timeout_s:
             stale.append("scan")
-        obs = Observation(now, robot, None, self._obstacles, self._scan_seen, velocity,
+        obs = Observation(now, robot, None, (), self._scan_seen, velocity,
                           tuple(detections), tuple(stale), None if odom is None else odom.t)
         with self._step_lock:
             cmd = self.stack.step(obs)
+            report = self.stack.report
         if future:
-            cmd = with_reasons(cmd, future)
-        self.last = cmd
-        e = cmd.estimate         # the estimate hides the person from the LiDAR; lost: nothing
-        self._seen = None if e is None else (e.state.x, e.state.y)
-        self._publish(now, robot, cmd)
+            report = with_reasons(report, future)
+            cmd = dataclasses.replace(cmd, status=report.status)
+        self.last, self.report = cmd, report
+        self._publish(now, robot, cmd, report)
         if self.view is not None and self.last is cmd and not self._announced:
             self._announced = True
             self.parameters.announce()
-        self._watch(now, cmd)
+        self._watch(now, report)
         return cmd
 
     def stop(self, now: float) -> None:
@@ -341,9 +339,9 @@ class CompanionNode:
                 self._people[:0] = waiting
         return out
 
-    def _use_scan(self, t: float, arrived: float, msg: Any, samples: deque[OdometrySample],
-                  now: float) -> None:
-        """A new scan placed at its stamp; its obstacles replace the previous scan's."""
+    def _place_scan(self, t: float, arrived: float, msg: Any,
+                    samples: deque[OdometrySample], now: float) -> None:
+        """A new scan placed at its stamp, for the stack's perception front end."""
         where = self.placer.frame(msg.header.frame_id, t, samples)
         if where == WAIT and now - min(arrived, now) < self.config.ros.tf_wait_s:
             with self._lock:
@@ -354,8 +352,7 @@ class CompanionNode:
                 self._cannot_place("scan", f"scans in frame {msg.header.frame_id or '(none)'}")
             return
         self._scan_t = t
-        self._scan_seen = convert.scan_from(msg, flat(where))
-        self._obstacles = self._lidar.update(self._scan_seen, t, self._seen)
+        self._scan_seen = convert.scan_from(msg, flat(where), t)
 
     def _cannot_place(self, key: str, frame: str) -> None:
         """Remember (until the next look at the graph) that inputs of ``key`` in ``frame``
@@ -368,34 +365,36 @@ class CompanionNode:
             line += " (or set ros.lidar_frame and ros.lidar_mount)"
         self._placing[key] = f"{getattr(r.topics, key)}: {line}"
 
-    def _publish(self, now: float, robot: Pose, cmd: Command) -> None:
+    def _publish(self, now: float, robot: Pose, cmd: Command, report: StepReport) -> None:
         p, r = self.config.params, self.config.ros
         tb = self.time or convert.ABSOLUTE
         self._cmd(convert.twist_msg(cmd.v, cmd.omega, r.cmd_vel_stamped, now, r.base_frame, tb))
         errors = slot = None
-        e = cmd.estimate
+        e = report.estimate
         if e is not None and math.isfinite(robot.x):
             w = e.walker
             errors = relative_state(robot.x, robot.y, robot.theta, w.x, w.y, w.theta,
                                     p.robot.d)
             slot = slot_point(w, p)
         meter = self.stack.delays
-        self._status(convert.status_msg(now, cmd, errors, r.node_name, tb, self.warnings,
-                                        (meter.latency, meter.tau)))
-        reach = tuple((ob, influence_range(ob, p.avoidance)) for ob in self._obstacles)
+        self._status(convert.status_msg(now, cmd, report, errors, r.node_name, tb,
+                                        self.warnings, (meter.latency, meter.tau)))
+        reach = tuple((ob, influence_range(ob, p.avoidance)) for ob in report.obstacles
+                      if isinstance(ob, Circle))
         self.view = View(now, robot, e, slot, reach)
         if self._markers is not None:
             self._markers(convert.markers_msg(now, r.odom_frame, e, slot, reach, tb))
 
-    def _watch(self, now: float, cmd: Command) -> None:
+    def _watch(self, now: float, report: StepReport) -> None:
         """The log of what changed: status changes, and each new problem on the graph or
         with placing inputs (checked every :data:`GRAPH_PERIOD_S`)."""
         status, reason, shown = self._shown
-        stop = "stopped" in (cmd.status, status)
-        if cmd.status != status and (stop or now - shown >= STATUS_LOG_S):
-            level = logging.WARNING if cmd.status == "stopped" else logging.INFO
-            self.log.log(level, "status %s%s", cmd.status, f": {cmd.reason}" * bool(cmd.reason))
-            self._shown = (cmd.status, cmd.reason, now)
+        stop = "stopped" in (report.status, status)
+        if report.status != status and (stop or now - shown >= STATUS_LOG_S):
+            level = logging.WARNING if report.status == "stopped" else logging.INFO
+            self.log.log(level, "status %s%s", report.status,
+                         f": {report.reason}" * bool(report.reason))
+            self._shown = (report.status, report.reason, now)
         if now - self._graph_t < GRAPH_PERIOD_S:
             return
         self._graph_t = now

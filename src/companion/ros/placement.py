@@ -14,7 +14,7 @@ A detection or a scan in frame F at stamp t is placed, in this order (docs/ros2.
 A transform the tree knows, but not yet at t (it arrives later than the input), makes the
 input wait (:data:`WAIT`), at most ``ros.tf_wait_s``. The odometry pose at t is interpolated
 between the samples around t (or moved on from the nearest with its velocity, at most
-0.5 s).
+0.5 s: :func:`companion.perception.front_end.pose_at`, the rule the whole stack uses).
 """
 
 from __future__ import annotations
@@ -26,35 +26,13 @@ from dataclasses import replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from companion.geometry import unicycle_step, wrap_pi
-from companion.ros.convert import OdometrySample
+from companion.perception.front_end import OdometrySample, pose_at
 from companion.ros.settings import RosParams
 from companion.ros.tf import Lookup, Transform, TransformBuffer
 from companion.types import PersonDetection, Pose
 
 #: The input's transform is known, but not yet at its stamp: try again at the next period.
 WAIT = "wait"
-
-
-def pose_at(samples: deque[OdometrySample], t: float) -> Pose | None:
-    """The odometry pose at time ``t``: interpolated between the samples around it, or
-    moved on from the nearest end with its velocity (at most 0.5 s); None without samples."""
-    if not samples:
-        return None
-    if t <= samples[0].t or t >= samples[-1].t:
-        s = samples[0] if t <= samples[0].t else samples[-1]
-        x, y, th = unicycle_step(s.pose.x, s.pose.y, s.pose.theta, *s.velocity,
-                                 max(-0.5, min(t - s.t, 0.5)))
-        return Pose(x, y, wrap_pi(th))
-    lo, hi = 0, len(samples) - 1
-    while hi - lo > 1:              # the samples are in time order
-        mid = (lo + hi) // 2
-        lo, hi = (mid, hi) if samples[mid].t <= t else (lo, mid)
-    a, b = samples[lo], samples[hi]
-    w = (t - a.t) / (b.t - a.t) if b.t > a.t else 0.0
-    dth = wrap_pi(b.pose.theta - a.pose.theta)
-    return Pose(a.pose.x + w * (b.pose.x - a.pose.x), a.pose.y + w * (b.pose.y - a.pose.y),
-                wrap_pi(a.pose.theta + w * dth))
 
 
 def planar(pose: Pose) -> Transform:

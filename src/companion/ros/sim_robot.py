@@ -4,10 +4,10 @@ The episode is the one ``companion run`` steps (:class:`companion.sim.episode.Si
 person, sensing model, LiDAR, actuator lag, the log), but the controller is on the wire:
 :class:`WireRobot` publishes what the robot senses at each sample (/odom, /tf odom ->
 base_link, /scan, /person detections, /clock) and hands the simulator the /cmd_vel received
-in the period, with the node's last /companion/status and estimate. Without one the
-simulator's base, like ros2_control's diff_drive_controller, keeps the last command for
-``robot.command_timeout_s`` and then brakes to a stop at the deceleration limits (logged as
-``stopped: command_timeout``).
+in the period; the node's last /companion/status and estimate are the log's step report.
+Without a command the simulator's base, like ros2_control's diff_drive_controller, keeps
+the last command for ``robot.command_timeout_s`` and then brakes to a stop at the
+deceleration limits (logged as ``stopped: command_timeout``).
 
 In lock step (``lockstep_s`` > 0, with /clock) each period waits for the node's answer to
 that period's /clock before the plant moves, as an in-process run does; docs/ros2.md.
@@ -30,7 +30,7 @@ from companion.ros.transport import DEFAULT, SENSOR_DATA, Qos, Transport
 from companion.sim.episode import Simulator, drive
 from companion.sim.runner import EpisodeSpec
 from companion.sim.sensing import LidarPerception
-from companion.types import Command, Log, Observation, PersonEstimate
+from companion.types import Command, Log, Observation, PersonEstimate, StepReport
 
 #: Where simulated time starts on the wire: 2000-01-01T00:00:00Z, in ns since 1970. Stamps,
 #: /clock and a bag's log times of a simulated run count from it (a bag of a simulated run
@@ -140,6 +140,8 @@ class WireRobot:
 
     def reset(self) -> None:
         self._last_scan = None
+        #: What the node said of its last command (its status topic): the log's report.
+        self.report = StepReport()
 
     def step(self, obs: Observation) -> Command | None:
         self.pacer.wait(obs.t)
@@ -176,8 +178,9 @@ class WireRobot:
                 self._lock.wait_for(lambda: self.commands >= due or self.pacer.stop.is_set(),
                                     self.lockstep_s)
             received, self._received = self._received, None
-            status, estimate = self._status, self._estimate
-        return None if received is None else Command(*received, 0.0, *status, estimate)
+            (status, reason), estimate = self._status, self._estimate
+        self.report = StepReport(status, reason, estimate=estimate)
+        return None if received is None else Command(*received, 0.0, status)
 
 
 def measured_type(params: Params) -> str:
@@ -204,4 +207,4 @@ def run_sim_robot(spec: EpisodeSpec, transport: Transport, ros: RosParams, pacer
         robot.wait_for_node(wait_s)
     sim = Simulator(spec.person, spec.params, spec.duration, spec.start, spec.obstacles,
                     LidarPerception(spec.params), spec.faults, spec.start_velocity)
-    return Log.concat(drive(sim, robot.step, spec.seed)), robot
+    return Log.concat(drive(sim, robot.step, spec.seed, report=lambda: robot.report)), robot

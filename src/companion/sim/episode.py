@@ -15,26 +15,25 @@ deterministic for a given seed.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable, Iterator, Sequence
 
 import numpy as np
 
 from companion.control.base import Controller
-from companion.control.slot import reference_point, slot_point
+from companion.control.supervisor import SafetySupervisor
 from companion.errors import ConfigError
-from companion.geometry import base_step, clearance, offset_point, unicycle_step, wrap_pi
-from companion.model import relative_state, robot_pose_at, slot_reference
+from companion.geometry import base_step, clearance, wrap_pi
+from companion.model import robot_pose_at, slot_reference
 from companion.params import IDEAL, Params
 from companion.sim.crowd import WALKER_RADIUS, Crowd
 from companion.sim.faults import Fault, stalled
 from companion.sim.faults import apply as apply_faults
 from companion.sim.person import PersonMotion
+from companion.sim.recorder import Recorder, Sample
 from companion.sim.sensing import GroundTruth, Perception, PersonSensor, in_view, streams
-from companion.types import LOG_COLUMNS, Command, Log, Observation, Obstacle, PersonState, Pose
+from companion.types import Command, Log, Observation, Obstacle, PersonState, Pose, StepReport
 
-_NO_ESTIMATE = (math.nan,) * 6
 #: Closing speed (m/s) of the robot's own motion above which a step inside the protective
 #: distance, or into a contact, is robot-caused.
 TOLERANCE = 0.01
@@ -53,32 +52,6 @@ def nearest_clearance(x: float, y: float, obstacles: Sequence[Obstacle], footpri
     if not obstacles:
         return math.nan
     return min(clearance(ob, x, y, footprint) for ob in obstacles)
-
-
-def error_split(robot: Pose, person: PersonState, cmd: Command, params: Params
-                ) -> tuple[float, float, float, float]:
-    """Where the slot error of one sample comes from (the log's last four columns):
-    ``(slot_error, estimate_error, tracking_error, safety_shift)`` in metres. The slot error
-    is from R (the reference point) to the true person's slot; the estimate's error from the
-    slot that ``cmd.estimate`` implies (its formation's person) to the true slot; tracking,
-    from R to that estimated slot; the safety shift, between the two places R reaches in one
-    period under ``cmd`` and under ``cmd.requested`` (0 without a request)."""
-    d, dt = params.robot.d, params.dt
-    rx, ry = reference_point(robot, d)
-    sx, sy = slot_point(person, params)
-    est = cmd.estimate
-    if est is None:
-        estimate_error = tracking_error = math.nan
-    else:
-        ex, ey = slot_point(est.walker, params)
-        estimate_error = math.hypot(ex - sx, ey - sy)
-        tracking_error = math.hypot(rx - ex, ry - ey)
-    shift = 0.0
-    if cmd.requested is not None and cmd.requested != (cmd.v, cmd.omega):
-        ends = [offset_point(*unicycle_step(robot.x, robot.y, robot.theta, v, w, dt), d)
-                for v, w in ((cmd.v, cmd.omega), cmd.requested)]
-        shift = math.hypot(ends[0][0] - ends[1][0], ends[0][1] - ends[1][1])
-    return math.hypot(rx - sx, ry - sy), estimate_error, tracking_error, shift
 
 
 def timed_out(command: tuple[float, float], params: Params) -> tuple[float, float]:
@@ -119,9 +92,10 @@ def episode_blocks(controller: Controller, person: PersonMotion, params: Params,
     Parameters
     ----------
     controller : Controller
-        Reset before the first step. A controller with ``takes_detections`` (the standard
-        stack) gets the person detections of ``params.sensing``; any other gets the true
-        person state, which needs ideal sensing.
+        Reset before the first step. The standard stack (a
+        :class:`~companion.control.supervisor.SafetySupervisor`) gets the person detections
+        of ``params.sensing`` and its step reports go into the log; any other controller gets
+        the true person state, which needs ideal sensing.
     person : PersonMotion
     params : Params
     duration : float
@@ -149,45 +123,52 @@ def episode_blocks(controller: Controller, person: PersonMotion, params: Params,
     ConfigError
         For a duration shorter than one period or sensing the controller cannot use.
     """
-    detections = getattr(controller, "takes_detections", False)
+    stack = isinstance(controller, SafetySupervisor)
     sim = Simulator(person, params, duration, start, obstacles, perception, faults,
-                    start_velocity, detections)
-    if not detections and params.sensing != IDEAL:
+                    start_velocity, stack)
+    if not stack and params.sensing != IDEAL:
         raise ConfigError("sensing: a controller without the standard stack sees the true "
                           "person state, which needs ideal sensing")
+    if not stack and not isinstance(sim.perception, GroundTruth):
+        raise ConfigError("obstacle_source: a controller without the standard stack has no "
+                          "perception front end to read a LiDAR; it needs truth")
 
     def started(sim: Simulator) -> None:
         controller.reset()
         if sim.start_velocity is not None:
             controller.applied(Command(*sim.start_velocity))
 
-    return drive(sim, controller.step, seed, rows, started)
+    report = (lambda: controller.report) if stack else None
+    return drive(sim, controller.step, seed, rows, started, report)
 
 
 def drive(sim: Simulator, act: Callable[[Observation], Command | None], seed: int = 0,
-          rows: int = BLOCK_ROWS, started: Callable[[Simulator], None] | None = None
-          ) -> Iterator[Log]:
+          rows: int = BLOCK_ROWS, started: Callable[[Simulator], None] | None = None,
+          report: Callable[[], StepReport] | None = None) -> Iterator[Log]:
     """Run ``sim`` from ``reset(seed)`` (then ``started(sim)``) to its end, asking ``act``
     for each sample's command (None: none came), except while a stall fault is active, and
-    yield the log in blocks of ``rows`` rows."""
+    yield the log in blocks of ``rows`` rows; ``report()`` gives the step report of each new
+    command (None: the command's status alone)."""
     if rows < 1:
         raise ConfigError(f"rows: expected a block of at least one row, got {rows}")
-    return _drive(sim, act, seed, rows, started)
+    return _drive(sim, act, seed, rows, started, report)
 
 
 def _drive(sim: Simulator, act: Callable[[Observation], Command | None], seed: int,
-           rows: int, started: Callable[[Simulator], None] | None) -> Iterator[Log]:
+           rows: int, started: Callable[[Simulator], None] | None,
+           report: Callable[[], StepReport] | None) -> Iterator[Log]:
     obs = sim.reset(seed)
     if started is not None:
         started(sim)
     walkers = 0 if sim.crowd is None else sim.crowd.n
-    block = _Block(min(rows, sim.steps), walkers)
+    recorder = Recorder(sim.params, min(rows, sim.steps), walkers)
     while obs is not None:
-        obs = sim.step(None if sim.stalled else act(obs))
-        block.add(*sim.row, sim.walkers_row)
-        if block.full() or obs is None:
-            yield block.log()
-            block = _Block(min(rows, sim.steps - sim.k), walkers)
+        cmd = None if sim.stalled else act(obs)
+        obs = sim.step(cmd)
+        recorder.add(sim.sample, None if cmd is None or report is None else report())
+        if recorder.full() or obs is None:
+            yield recorder.log()
+            recorder.start(min(rows, sim.steps - sim.k), walkers)
 
 
 class Simulator:
@@ -214,9 +195,8 @@ class Simulator:
         self.detections = detections
         self._start_velocity = start_velocity
         self.k = 0
-        self.row: tuple[tuple[float, ...], str, str] | None = None
-        #: The walkers' positions at the sample of :attr:`row` (x0, y0, x1, ...; crowds only).
-        self.walkers_row: np.ndarray | None = None
+        #: The true state of the last sample stepped and the command applied from it.
+        self.sample: Sample | None = None
 
     def reset(self, seed: int = 0) -> Observation:
         """Start the episode over with the sensing noise of ``seed``; the first observation.
@@ -245,9 +225,8 @@ class Simulator:
         self._cmd = Command(0.0, 0.0)
         self._base = self.start_velocity or (0.0, 0.0)   # what the base executes
         self._last_command = 0.0
-        self._seen: tuple[float, float] | None = None    # where the robot believes the person is
         self.k = 0
-        self.row = None
+        self.sample = None
         return self._observe()
 
     @property
@@ -265,14 +244,9 @@ class Simulator:
         arrived = (*self._handover, *self._sensor.detections(t, self._in_view)) \
             if self.detections else ()
         self._handover = ()
-        if not self.detections:
-            self._seen = (h.x, h.y)
-        elif arrived:
-            self._seen = (arrived[-1].x, arrived[-1].y)
-        known = self.perception.obstacles(self.k, pose, world, (h.x, h.y), self._seen,
-                                          self._rng["lidar"])
-        obs = Observation(t, pose, None if self.detections else h, known,
-                          self.perception.scan(), (self._va, self._wa), arrived)
+        known, scan = self.perception.sense(self.k, pose, world, (h.x, h.y), self._rng["lidar"])
+        obs = Observation(t, pose, None if self.detections else h, known, scan,
+                          (self._va, self._wa), arrived)
         return apply_faults(obs, self.faults)
 
     def _blockers(self) -> tuple[Obstacle, ...]:
@@ -283,40 +257,27 @@ class Simulator:
         """Apply ``command`` from the current sample on (None: no new command, as from a
         stalled controller or a silent node: the last one stays in force until the base's
         command timeout, then the base brakes, logged as ``stopped: command_timeout``);
-        record :attr:`row`; advance one period. The next observation, or None after the last
-        sample."""
-        if self.row is not None and self.k >= self.steps:
+        the true state of this sample in :attr:`sample`; advance one period. The next
+        observation, or None after the last sample."""
+        if self.sample is not None and self.k >= self.steps:
             raise RuntimeError("step: the episode is over; reset() starts it again")
-        p, f, d = self.params, self.params.formation, self.params.robot.d
+        p = self.params
         t = self.k * p.dt
+        came = "new"
         if command is not None:
             self._cmd, self._base, self._last_command = command, (command.v, command.omega), t
         elif t - self._last_command >= p.robot.command_timeout_s - 1e-9:
             self._base = timed_out(self._base, p)
-            self._cmd = Command(*self._base, 0.0, "stopped", "command_timeout",
-                                self._cmd.estimate, bearing=self._cmd.bearing)
-        cmd = self._cmd
-        e = cmd.estimate
-        if self.detections:      # the estimate hides the person from the LiDAR; lost: nothing
-            self._seen = None if e is None else (e.state.x, e.state.y)
-        est = _NO_ESTIMATE if e is None else (e.state.x, e.state.y, e.state.theta, e.state.v,
-                                              e.state.omega, e.position_std)
+            self._cmd, came = Command(*self._base, 0.0, "stopped"), "timeout"
+        else:
+            came = "held"
         x, y, th, va, wa = self._x, self._y, self._th, self._va, self._wa
-        h = self.person.state(t)
-        if cmd.bearing is not None and cmd.bearing != f.bearing:   # a formation policy's
-            p = p.replace(formation=dataclasses.replace(f, bearing=cmd.bearing))
-            f = p.formation
-        rho, alpha, beta = relative_state(x, y, th, h.x, h.y, h.theta, d)
-        beta_ref = slot_reference(h.v, h.omega, f.distance, f.bearing, d).beta
-        self.row = ((t, x, y, th, h.x, h.y, h.theta, h.v, h.omega, rho, alpha, beta,
-                     f.distance, f.bearing, beta_ref, cmd.v, cmd.omega, cmd.u_ob,
-                     nearest_clearance(x, y, self.obstacles, p.robot.radius), va, wa, *est,
-                     *error_split(Pose(x, y, th), h, cmd, p),
-                     math.hypot(h.x - x, h.y - y) - p.robot.radius - p.lidar.person_radius,
-                     *self._walkers.sample(x, y, self.crowd), float(self._in_view)),
-                    cmd.status, cmd.reason)
+        walkers = None if self.crowd is None else self.crowd.positions[:-1].ravel().copy()
+        self.sample = Sample(t, Pose(x, y, th), (va, wa), self.person.state(t), self._cmd,
+                             nearest_clearance(x, y, self.obstacles, p.robot.radius),
+                             *self._walkers.sample(x, y, self.crowd), self._in_view, came,
+                             walkers)
         if self.crowd is not None:
-            self.walkers_row = self.crowd.positions[:-1].ravel().copy()
             self.crowd.step((x, y, va * math.cos(th), va * math.sin(th)))
         x, y, th, self._va, self._wa = base_step(x, y, th, va, wa, *self._base,
                                                  p.sensing.actuator_tau_s, p.dt)
@@ -350,33 +311,3 @@ class _WalkerContacts:
                 code = 1.0 if np.any(own > TOLERANCE) else 2.0
         self._before = (x, y, gaps, walkers.copy())
         return float(gaps.min()), code
-
-
-class _Block:
-    """Rows of a log being filled, numbers in one array, texts in lists, and the positions
-    of a crowd's ``walkers`` (the log's column ``walkers_xy``, rows of x0, y0, x1, ...)."""
-
-    def __init__(self, rows: int, walkers: int = 0):
-        self.numbers = np.empty((rows, len(LOG_COLUMNS)))
-        self.walkers = np.empty((rows, 2 * walkers)) if walkers else None
-        self.status: list[str] = []
-        self.reason: list[str] = []
-
-    def add(self, numbers: tuple[float, ...], status: str, reason: str,
-            walkers: np.ndarray | None = None) -> None:
-        if self.walkers is not None:
-            self.walkers[len(self.status)] = walkers
-        self.numbers[len(self.status)] = numbers
-        self.status.append(status)
-        self.reason.append(reason)
-
-    def full(self) -> bool:
-        return len(self.status) == len(self.numbers)
-
-    def log(self) -> Log:
-        columns = {name: self.numbers[:, i] for i, name in enumerate(LOG_COLUMNS)}
-        columns["status"] = np.array(self.status, dtype=str)
-        columns["reason"] = np.array(self.reason, dtype=str)
-        if self.walkers is not None:
-            columns["walkers_xy"] = self.walkers
-        return Log(columns)

@@ -23,9 +23,10 @@ import numpy as np
 from companion.geometry import wrap_pi
 from companion.params import load_sensing
 from companion.sim.episode import Simulator
+from companion.sim.recorder import row as log_row
 from companion.sim.scenario import load_scenario
 from companion.sim.sensing import make_perception
-from companion.types import LOG_COLUMNS, Command, Observation, PersonDetection
+from companion.types import LOG_COLUMNS, Command, Observation, PersonDetection, StepReport
 
 #: The observation vector's entries, in order (SI units, robot frame: x ahead, y left).
 OBSERVATION = ("person_x", "person_y", "person_heading", "person_speed", "heading_measured",
@@ -72,7 +73,7 @@ class FollowEnv(gym.Env):
         v, omega = np.clip(np.asarray(action, dtype=float), self.action_space.low,
                            self.action_space.high)
         obs = self._sim.step(Command(float(v), float(omega)))
-        numbers, _, _ = self._sim.row
+        numbers = log_row(self._sim.sample, StepReport(), self.params)
         row = {k: x for k, x in zip(LOG_COLUMNS, numbers) if not math.isnan(x)}
         contact = math.hypot(row["person_x"] - row["robot_x"], row["person_y"] - row["robot_y"]) \
             < self.params.robot.radius + self.params.lidar.person_radius

@@ -2,16 +2,16 @@
 
 :class:`PersonSensor` samples detections of the person from the true motion as the sensing
 profile says (rate, noise, latency, dropouts, holes in a recording). For obstacles a
-perception model is asked once per control step for the obstacles the controller knows about
+perception model is asked once per control step for what the robot's obstacle sensors give
 (world frame): ``GroundTruth`` passes the world's obstacles through; ``LidarPerception`` casts
-a scan at the LiDAR's rate, extracts circles from it (the tracked person excluded) and holds
-them until the next scan. Each noise source draws from its own random stream
-(:func:`streams`), so two controllers run on one seed see the same person detections and the
-same LiDAR noise.
+a scan at the LiDAR's rate, which the robot's own front end turns into obstacles. Each noise
+source draws from its own random stream (:func:`streams`), so two controllers run on one
+seed see the same person detections and the same LiDAR noise.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from typing import Protocol
@@ -21,7 +21,6 @@ import numpy as np
 from companion.errors import ConfigError
 from companion.geometry import line_of_sight
 from companion.params import Params, SensingParams
-from companion.perception import LidarObstacles
 from companion.sim.lidar import cast
 from companion.sim.person import PersonMotion
 from companion.types import Circle, Obstacle, PersonDetection, PersonState, Pose, Scan, Wall
@@ -125,16 +124,18 @@ def in_view(robot: Pose, person: PersonState, blockers: Sequence[Obstacle],
 
 
 class Perception(Protocol):
+    """What the robot's obstacle sensors give at each control step: the obstacles known
+    exactly (a map) and the LiDAR's latest scan. The robot's own front end
+    (:class:`~companion.perception.front_end.FrontEnd`) turns scans into obstacles: the
+    simulated world never reads what the robot believes."""
+
     def reset(self) -> None:
         """Forget everything before a new episode."""
 
-    def obstacles(self, step: int, robot: Pose, world: Sequence[Obstacle],
-                  person_true: tuple[float, float], person_seen: tuple[float, float],
-                  rng: np.random.Generator) -> tuple[Obstacle, ...]:
-        """Obstacles known at control step ``step``."""
-
-    def scan(self) -> Scan | None:
-        """The latest LiDAR scan (None without a LiDAR)."""
+    def sense(self, step: int, robot: Pose, world: Sequence[Obstacle],
+              person: tuple[float, float], rng: np.random.Generator
+              ) -> tuple[tuple[Obstacle, ...], Scan | None]:
+        """The known obstacles and the latest scan at control step ``step``."""
 
 
 class GroundTruth:
@@ -143,46 +144,34 @@ class GroundTruth:
     def reset(self) -> None:
         pass
 
-    def obstacles(self, step: int, robot: Pose, world: Sequence[Obstacle],
-                  person_true: tuple[float, float], person_seen: tuple[float, float],
-                  rng: np.random.Generator) -> tuple[Obstacle, ...]:
-        return tuple(world)
-
-    def scan(self) -> Scan | None:
-        return None
+    def sense(self, step: int, robot: Pose, world: Sequence[Obstacle],
+              person: tuple[float, float], rng: np.random.Generator
+              ) -> tuple[tuple[Obstacle, ...], Scan | None]:
+        return tuple(world), None
 
 
 class LidarPerception:
-    """The controller sees what a simulated LiDAR detects: a scan every
-    ``round(1 / (sensing.lidar_rate_hz * dt))`` steps, cast against the true obstacles and the
-    person's body, turned into circles by :class:`companion.perception.LidarObstacles` (the
-    tracked person, at its estimated position, is excluded; moving ones with their
-    velocities) and held until the next scan."""
+    """A simulated LiDAR: a scan every ``round(1 / (sensing.lidar_rate_hz * dt))`` steps, cast
+    against the true obstacles and the person's body, stamped with its time and held (the
+    latest scan) until the next; nothing is known exactly."""
 
     def __init__(self, params: Params):
         self.params = params
         self.every = max(1, round(1.0 / (params.sensing.lidar_rate_hz * params.dt)))
-        self.front = LidarObstacles(params.extractor, params.movers)
         self.reset()
 
     def reset(self) -> None:
-        self.held: tuple[Obstacle, ...] = ()
         self.last_scan: Scan | None = None
-        self.front.reset()
 
-    def obstacles(self, step: int, robot: Pose, world: Sequence[Obstacle],
-                  person_true: tuple[float, float], person_seen: tuple[float, float],
-                  rng: np.random.Generator) -> tuple[Obstacle, ...]:
+    def sense(self, step: int, robot: Pose, world: Sequence[Obstacle],
+              person: tuple[float, float], rng: np.random.Generator
+              ) -> tuple[tuple[Obstacle, ...], Scan | None]:
         if step % self.every == 0:
             circles = [ob for ob in world if isinstance(ob, Circle)]
             walls = [ob for ob in world if isinstance(ob, Wall)]
-            scan = cast(robot, circles, walls, person_true, self.params.lidar, rng)
-            self.last_scan = scan
-            self.held = self.front.update(scan, step * self.params.dt, person_seen)
-        return self.held
-
-    def scan(self) -> Scan | None:
-        return self.last_scan
+            scan = cast(robot, circles, walls, person, self.params.lidar, rng)
+            self.last_scan = dataclasses.replace(scan, t=step * self.params.dt)
+        return (), self.last_scan
 
 
 #: Where the controller's obstacles come from (see the module docstring).
