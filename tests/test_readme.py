@@ -1,9 +1,12 @@
-"""The README's Python quickstart runs as printed and says what it prints."""
+"""The README's Python quickstart runs as printed and says what it prints; its architecture map
+names every module."""
 
 import re
 from pathlib import Path
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+PACKAGE = ROOT / "src" / "companion"
 
 
 def test_quickstart_runs(capsys):
@@ -16,3 +19,24 @@ def test_quickstart_runs(capsys):
     v, omega, status = printed[1].split()
     assert abs(float(v)) <= 1.5 and abs(float(omega)) <= 1.6 and status == "ok"
     assert 0.0 < scope["worst"] < 0.5                    # every start converged
+
+
+def modules() -> set[str]:
+    """Every module of the package by its stem (``front_end`` for ``perception/front_end.py``)
+    and every subpackage by its folder name; data and TOML files are not modules."""
+    names = {p.stem for p in PACKAGE.rglob("*.py")
+             if p.name != "__init__.py" and "__pycache__" not in p.parts}
+    names |= {p.parent.name for p in PACKAGE.rglob("__init__.py")
+              if p.parent != PACKAGE and "__pycache__" not in p.parts}
+    return names
+
+
+def test_architecture_map_names_every_module():
+    text = README.read_text()
+    found = re.search(r"^## Architecture\s*\n+```[^\n]*\n(.*?)^```", text, re.S | re.M)
+    assert found, "README.md has no code block under '## Architecture'"
+    block = found.group(1)
+    missing = sorted(name for name in modules()
+                     if not re.search(rf"(?<!\w){re.escape(name)}(?!\w)", block))
+    assert not missing, ("README.md's architecture map does not name these modules of "
+                         f"src/companion: {', '.join(missing)}")
