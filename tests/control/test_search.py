@@ -9,12 +9,15 @@ import numpy as np
 import pytest
 
 from companion import metrics
+from companion.control.choice import Choosing
+from companion.control.delays import DelayMeter
 from companion.control.search import Search, search_goal
+from companion.control.stages import Step
 from companion.params import REALISTIC, Params
 from companion.sim.faults import faults_from_list
 from companion.sim.person import line
 from companion.sim.runner import EpisodeSpec, run_one
-from companion.types import Circle, PersonEstimate, PersonState, Pose
+from companion.types import Circle, Observation, PersonEstimate, PersonState, Pose
 
 #: The detector goes silent from 5 to 12 s while the person walks on at 1 m/s.
 SILENT = faults_from_list([{"kind": "person_dropout", "start": 5.0, "end": 12.0}], "test")
@@ -113,3 +116,19 @@ def test_the_search_stops_short_of_where_the_person_would_be():
     assert v[0] == pytest.approx(1.5)
     assert 0.0 < v[1] < 1.4
     assert v[2] == 0.0                           # inside the protective distance: no closer
+
+
+@pytest.mark.parametrize("prev", [(0.04, 0.0), (0.0, 0.09), (0.0, 0.0)])
+def test_the_choosing_stage_waits_for_rest_before_a_search(prev):
+    """The stage alone: a lost person and the last command ``prev``: the search's first
+    command comes only once the robot is at rest (it used to start below 0.05 m/s and
+    0.1 rad/s)."""
+    p = Params()
+    stage = Choosing(p, DelayMeter(p))
+    seen = PersonState(1.0, 0.0, 0.0, 1.0, 0.0)
+    stage(Step(Observation(0.0, Pose(0.0, 0.0, 0.0)), p, prev,
+               estimate=PersonEstimate(seen, 0.05, np.eye(5), 0.0, "seen", seen)))
+    s = Step(Observation(0.05, Pose(0.0, 0.0, 0.0)), p, prev, lost=True)
+    stage(s)
+    assert (s.manoeuvre is not None) == (prev == (0.0, 0.0))
+    assert s.stop == ("" if prev == (0.0, 0.0) else "person_lost")
