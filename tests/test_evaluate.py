@@ -322,3 +322,4 @@ def test_an_unknown_suite_name_lists_the_shipped_ones(tmp_path):
         load_suite("pedestrian")
     with pytest.raises(ConfigError, match="no such file"):
         load_suite(tmp_path / "missing.toml")
+
