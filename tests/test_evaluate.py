@@ -97,6 +97,17 @@ def test_a_side_that_a_controller_cannot_hold_names_the_file_and_the_factors(tmp
         f"{path}: sides[1], sensing[0], controllers[1]: formation.distance: the slot at 0.7 m")
 
 
+def test_weights_without_a_gain_in_a_suite_name_the_file_and_the_factors(tmp_path):
+    text = SUITE.replace('controllers = ["lqr", "pid"]',
+                         'controllers = ["pid", {name = "lqr", params = {lqr = {q = [0, 0, 0, 0, '
+                         '0]}}, label = "zero"}]').replace('reference = "lqr"', "")
+    path = _suite(tmp_path, text)
+    with pytest.raises(ConfigError) as err:
+        load_suite(path)
+    assert str(err.value).startswith(f"{path}: sides[0], sensing[0], controllers[1]: ")
+    assert "params.lqr.q: no stabilising LQR gain" in str(err.value)
+
+
 @pytest.mark.parametrize("change,key", [
     ('sides = [7.0]', "sides[0]"), ('duration = nan', "duration"),
     ('duration = 0.001', "duration"), ('seeds = 1000000000', "seeds")])

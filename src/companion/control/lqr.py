@@ -91,7 +91,7 @@ class LqrController:
         try:
             self._rest_gain = self.gain(*rest_operating_point(params))
         except np.linalg.LinAlgError:
-            raise ConfigError(f"lqr.q, lqr.r: no stabilising LQR gain for the slot with "
+            raise ConfigError(f"lqr.q: no stabilising LQR gain for the slot with "
                               f"q = {params.lqr.q}, r = {params.lqr.r} (every weight of q "
                               f"> 0 gives one)") from None
         self.reset()

@@ -12,15 +12,16 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from companion.config import MAX_DURATION, build, load_toml, reject_unknown
-from companion.control import CONTROLLERS
+from companion.control import CONTROLLERS, make_controller
 from companion.errors import ConfigError
 from companion.evaluate.motions import fixed_sides, motions
 from companion.evaluate.rows import Criterion, criteria_from
@@ -164,7 +165,8 @@ def suite_from_mapping(data: Mapping[str, Any], path: Path, digest: Any = None) 
                     for label, name, overrides in controllers:
                         key = (group, label, side_name, sensing_name)
                         if key not in final:
-                            final[key] = _final(base(label, overrides), bearing, sensing_params,
+                            final[key] = _final(partial(base, label, overrides), name, bearing,
+                                                sensing_params,
                                                 _factors(where, sides, side_name, sensing,
                                                          sensing_name, controllers, label))
                         if duration is not None and duration < final[key].dt:
@@ -188,15 +190,20 @@ def suite_from_mapping(data: Mapping[str, Any], path: Path, digest: Any = None) 
                  tuple(episodes), digest.hexdigest(), criteria)
 
 
-def _final(p: Params, bearing: float | None, sensing: SensingParams, where: str) -> Params:
-    """An episode's parameters: ``p`` with the suite's sensing and side (``bearing``; None:
-    the motion's own); a combination the checks across sections refuse raises naming
-    ``where``."""
+def _final(base: Callable[[], Params], controller: str, bearing: float | None,
+           sensing: SensingParams, where: str) -> Params:
+    """An episode's parameters: the motion's with a controller's overrides (``base()``) and
+    the suite's sensing and side (``bearing``; None: the motion's own). A combination that
+    the checks across sections refuse, or whose ``controller`` cannot be made (LQR weights
+    without a stabilising gain), raises naming ``where``."""
     try:
-        return p.replace(sensing=sensing, formation=dataclasses.replace(
+        p = base()
+        p = p.replace(sensing=sensing, formation=dataclasses.replace(
             p.formation, bearing=p.formation.bearing if bearing is None else bearing))
+        make_controller(controller, p)
     except ConfigError as exc:
         raise ConfigError(f"{where}: {exc}") from None
+    return p
 
 
 def _factors(where: str, sides: list, side: str, sensing: list, sensing_name: str,
