@@ -283,6 +283,22 @@ def test_tuning_on_a_suite_improves_resumes_and_writes_a_params_file(tmp_path, c
     assert "controllers: expected 'lqr'" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("where", ["missing", "folder"])
+def test_an_unopenable_storage_is_one_line_naming_it(tmp_path, capsys, where):
+    pytest.importorskip("optuna")
+    path = _suite(tmp_path, SUITE.replace('controllers = ["lqr", "pid"]', 'controllers = ["pid"]')
+                  .replace('reference = "lqr"', ""))
+    (tmp_path / "folder.db").mkdir()
+    db = tmp_path / "nonexistent" / "dir" / "x.db" if where == "missing" else tmp_path / "folder.db"
+    storage = f"sqlite:///{db}"
+    assert main(["tune", "pid", "--suite", str(path), "--storage", storage, "--trials", "1",
+                 "--workers", "1", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert err[0] == f"companion: error: --storage {storage}: cannot open it (unable to open " \
+                     f"database file)"
+
+
 def test_the_tracker_is_tuned_on_a_suite_with_the_same_study(tmp_path):
     """The tracker's settings go through the same Optuna study as the gains: the first
     trial is the current settings, every trial stays in the search box, and the best are
