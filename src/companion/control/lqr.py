@@ -44,7 +44,7 @@ def euler_model(rho: float, alpha: float, beta: float, v: float, omega: float, v
     return augmented(a, b)
 
 
-_euler_model = kernel(euler_model)
+_euler_model = kernel(euler_model, lambda: (1.0, 1.5, 0.0, 1.0, 0.0, 1.0, 0.25, 0.05))
 
 
 def augmented_model(chi, u, w, params: Params) -> tuple[np.ndarray, np.ndarray]:

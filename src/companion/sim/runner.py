@@ -23,15 +23,15 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import Any, NamedTuple
 
-from companion._jit import compile_lock
+from companion import _jit
 from companion.control import make_controller
 from companion.errors import ConfigError
 from companion.params import Params
 from companion.sim.episode import BLOCK_ROWS, episode_blocks
 from companion.sim.faults import Fault
-from companion.sim.person import PersonMotion, line
+from companion.sim.person import PersonMotion
 from companion.sim.sensing import make_perception
-from companion.types import Circle, Log, Obstacle, Pose
+from companion.types import Log, Obstacle, Pose
 
 
 @dataclass(frozen=True)
@@ -75,12 +75,10 @@ def default_workers() -> int:
 
 
 def warm_up() -> None:
-    """Load (or compile) the compiled kernels of the stack in this process, so that worker
-    processes forked from it inherit them instead of each loading them: a few steps of the
-    full stack with an obstacle and a LiDAR, under the cache's compile lock."""
-    with compile_lock():
-        run_one(EpisodeSpec("lqr", line((0.0, 0.0, 0.0), 1.0), Params(), 0.2,
-                            obstacles=(Circle(1.5, 1.2, 0.3),), obstacle_source="lidar"))
+    """Load (or compile) the compiled kernels of the stack in this process
+    (:func:`companion._jit.warm_up`), so that worker processes forked from it inherit them
+    instead of each loading them."""
+    _jit.warm_up()
 
 
 class WithSpec(NamedTuple):
