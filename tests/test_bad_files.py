@@ -57,7 +57,7 @@ def test_bad_person_csv(tmp_path, capsys, row, where, words):
                                                   "fraction in [0, 1]"]),
     ("[robot]\nv_max = nan\n", ["p.toml: robot.v_max: expected a number, got nan"]),
     ("[lqr]\nq = [1, 2, 3, 4, true]\n", ["p.toml: lqr.q[4]: expected a number"]),
-    ("[lqr]\nq = [0, 0, 0, 0, 0]\n", ["p.toml: lqr.q, lqr.r: no stabilising LQR gain"]),
+    ("[lqr]\nq = [0, 0, 0, 0, 0]\n", ["p.toml: ", "lqr.q: no stabilising LQR gain"]),
     ("[lqr]\nq = [1e300, 1, 1, 1, 1]\n", ["p.toml: lqr.q[0]: expected a finite number of "
                                           "magnitude at most 1e+06"]),
     ("[formation]\ndistance = inf\n", ["p.toml: formation.distance: expected a finite number"]),

@@ -170,6 +170,9 @@ def test_bad_usage_exits_2_with_one_line(argv, message, capsys, tmp_path):
      "bad.toml: controller: unknown controller 'lqrr'; did you mean 'lqr'"),
     ('duration = 1e9\n[person]\nkind = "line"\n',
      "duration: expected a number of seconds in (0, 86400]"),
+    ('[person]\nkind = "line"\n[params.lqr]\nq = [0, 0, 0, 0, 0]\n',
+     "bad.toml: params.lqr.q: no stabilising LQR gain for the slot with q = (0.0, 0.0, 0.0, "
+     "0.0, 0.0)"),
 ])
 def test_bad_scenario_file(tmp_path, capsys, text, message):
     f = tmp_path / "bad.toml"

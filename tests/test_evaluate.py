@@ -52,12 +52,22 @@ def test_a_suite_expands_to_every_combination_with_shared_seeds(tmp_path):
 @pytest.mark.parametrize("change,message", [
     ('controllers = ["lqr", "pdi"]', "controllers[1].name: expected one of"),
     ('sides = ["up"]', "sides[0]: expected one of"),
-    ('seeds = 0', "seeds: expected an integer >= 1"),
+    ('seeds = 0', "seeds: expected an integer in [1, 100000] or a list of seeds, got 0"),
     ('sensing = ["perfect"]', "sensing[0]:"),
     ('reference = "vsm"', "reference: expected one of the controllers"),
     ('colour = "red"', "colour: unknown key"),
     ('sides = ["left", "left"]', "two episodes would be"),
     ('scenarios = ["nowhere"]', "motions.scenarios[0]:"),
+    ('sides = [7.0]', "sides[0]: expected an angle in [0, 2*pi) rad, got 7.0"),
+    ('duration = nan', "duration: expected a number of seconds in (0, 86400], got nan"),
+    ('duration = inf', "duration: expected a number of seconds in (0, 86400], got inf"),
+    ('duration = 0.001', "duration: expected at least one sample period (params.dt = 0.05 s"),
+    ('seeds = 1e9', "seeds: expected an integer in [1, 100000] or a list of seeds"),
+    ('seeds = 1000000000', "seeds: expected an integer in [1, 100000] or a list of seeds"),
+    ('seeds = [-1]', "seeds[0]: expected a seed >= 0"),
+    ('seeds = 100000', "expected at most 100000 episodes, got 400000"),
+    ('name = 3', "name: expected a string, got 3"),
+    ('description = ["a"]', "description: expected a string, got ['a']"),
 ])
 def test_bad_suites_name_the_file_and_key(tmp_path, change, message):
     key = change.split(" = ")[0]
@@ -70,6 +80,47 @@ def test_bad_suites_name_the_file_and_key(tmp_path, change, message):
     with pytest.raises(ConfigError) as err:
         load_suite(path)
     assert str(err.value).startswith(f"{path}: ") and message in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_a_side_that_a_controller_cannot_hold_names_the_file_and_the_factors(tmp_path):
+    """The slot 0.7 m in front puts the robot centre 0.45 m from the person: the side, the
+    sensing and the controller that make it are named."""
+    text = SUITE.replace('sides = ["left", "right"]', 'sides = ["left", "front"]').replace(
+        'controllers = ["lqr", "pid"]',
+        'controllers = ["lqr", {name = "lqr", params = {formation = {distance = 0.7}}, '
+        'label = "near"}]')
+    path = _suite(tmp_path, text)
+    with pytest.raises(ConfigError) as err:
+        load_suite(path)
+    assert str(err.value).startswith(
+        f"{path}: sides[1], sensing[0], controllers[1]: formation.distance: the slot at 0.7 m")
+
+
+def test_weights_without_a_gain_in_a_suite_name_the_file_and_the_factors(tmp_path):
+    text = SUITE.replace('controllers = ["lqr", "pid"]',
+                         'controllers = ["pid", {name = "lqr", params = {lqr = {q = [0, 0, 0, 0, '
+                         '0]}}, label = "zero"}]').replace('reference = "lqr"', "")
+    path = _suite(tmp_path, text)
+    with pytest.raises(ConfigError) as err:
+        load_suite(path)
+    assert str(err.value).startswith(f"{path}: sides[0], sensing[0], controllers[1]: ")
+    assert "params.lqr.q: no stabilising LQR gain" in str(err.value)
+
+
+@pytest.mark.parametrize("change,key", [
+    ('sides = [7.0]', "sides[0]"), ('duration = nan', "duration"),
+    ('duration = 0.001', "duration"), ('seeds = 1000000000', "seeds")])
+def test_the_command_rejects_a_bad_suite_before_running(tmp_path, capsys, change, key):
+    """Exit 2, one line naming the file and the key, no output folder (nor its partial one)."""
+    text = "\n".join(line for line in SUITE.splitlines()
+                     if not line.startswith(change.split(" = ")[0] + " "))
+    bad = _suite(tmp_path, change + "\n" + text, "bad.toml")
+    assert main(["evaluate", str(bad), "--out", str(tmp_path / "out"), "--workers", "1"]) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and f"{bad}: {key}: expected" in err[0], captured
+    assert not (tmp_path / "out").exists()
 
 
 def test_a_killed_run_resumes_and_gives_the_uninterrupted_results(tmp_path):
@@ -232,6 +283,22 @@ def test_tuning_on_a_suite_improves_resumes_and_writes_a_params_file(tmp_path, c
     assert "controllers: expected 'lqr'" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("where", ["missing", "folder"])
+def test_an_unopenable_storage_is_one_line_naming_it(tmp_path, capsys, where):
+    pytest.importorskip("optuna")
+    path = _suite(tmp_path, SUITE.replace('controllers = ["lqr", "pid"]', 'controllers = ["pid"]')
+                  .replace('reference = "lqr"', ""))
+    (tmp_path / "folder.db").mkdir()
+    db = tmp_path / "nonexistent" / "dir" / "x.db" if where == "missing" else tmp_path / "folder.db"
+    storage = f"sqlite:///{db}"
+    assert main(["tune", "pid", "--suite", str(path), "--storage", storage, "--trials", "1",
+                 "--workers", "1", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert err[0] == f"companion: error: --storage {storage}: cannot open it (unable to open " \
+                     f"database file)"
+
+
 def test_the_tracker_is_tuned_on_a_suite_with_the_same_study(tmp_path):
     """The tracker's settings go through the same Optuna study as the gains: the first
     trial is the current settings, every trial stays in the search box, and the best are
@@ -282,3 +349,4 @@ def test_an_unknown_suite_name_lists_the_shipped_ones(tmp_path):
         load_suite("pedestrian")
     with pytest.raises(ConfigError, match="no such file"):
         load_suite(tmp_path / "missing.toml")
+

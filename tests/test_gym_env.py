@@ -66,3 +66,26 @@ def test_the_companion_stack_as_a_policy_earns_more_than_standing_still():
     assert rewards.mean() > -0.05
     still, _, _ = _episode(env, lambda obs, info: np.zeros(2), 0)
     assert still.mean() < -1.0
+
+
+@pytest.mark.parametrize("action, message", [
+    (np.array((np.nan, 0.0)), "finite"), (np.array((0.5, np.inf)), "finite"),
+    (np.array((0.5,)), r"shape \(2,\)"), (np.array((0.5, 0.0, 0.1)), r"shape \(2,\)"),
+    (0.5, r"shape \(2,\)")])
+def test_a_malformed_action_is_refused_and_simulates_nothing(action, message):
+    env = FollowEnv("line", "ideal", duration=3.0)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=message):
+        env.step(action)
+    obs, reward, terminated, truncated, info = env.step(np.zeros(2))  # the episode goes on
+    assert np.all(np.isfinite(obs)) and np.isfinite(reward) and not (terminated or truncated)
+    assert info["observation"].t == pytest.approx(env.params.dt)
+
+
+def test_an_action_outside_the_box_is_clipped():
+    env = FollowEnv("line", "ideal", duration=3.0)
+    env.reset(seed=0)
+    *_, fast = env.step(np.array((100.0, -100.0)))
+    env.reset(seed=0)
+    *_, limit = env.step(env.action_space.low * (-1.0, 1.0))
+    assert fast["row"] == limit["row"]

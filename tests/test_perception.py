@@ -281,3 +281,14 @@ def test_all_cluster_points_covered_in_random_worlds():
         # with min_points = 1 nothing is dropped, so every return must be covered
         assert_all_points_covered(scan, extract_obstacles(scan, None, kept))
         assert_no_phantoms(found, objects)
+
+
+@pytest.mark.parametrize("huge", [float(np.float32(3.4028235e38)), 1e20, 1e4])
+def test_driver_no_return_ranges_with_default_range_max(huge):
+    # range_max left infinite: FLT_MAX, 1e20 (and anything beyond 1 km) is "no return"
+    scan = _hand_scan([2.0] * 5 + [huge] * 5 + [3.0] * 5)
+    assert scan.range_max == math.inf
+    found = extract_obstacles(scan, None, PARAMS)
+    assert len(found) == 2
+    assert [round(math.hypot(c.x, c.y)) for c in found] == [2, 3]
+    assert extract_obstacles(_hand_scan([huge] * 6), None, PARAMS) == []

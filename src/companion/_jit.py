@@ -7,6 +7,13 @@
 
 So every compiled kernel is compiled from the same Python source that tests run directly.
 
+Every kernel that Python calls is registered (:data:`KERNELS`) with an example call: small
+arguments of the types the package passes. :func:`warm_up` loads (or compiles) them all, so
+that a process can compile before its first control period (``companion node``) or before
+forking workers that inherit the kernels. Kernels register themselves when their module is
+imported (this module imports nothing of the package): importing :mod:`companion.control`
+registers every kernel of the stack (control, tracking, riccati, geometry).
+
 numba checks a cached kernel against its own source file only, and a kernel inlines the
 jitable functions of other modules, so a change to those would leave a stale kernel. The
 cache therefore lives in a directory named after a hash of every source file of the package
@@ -27,8 +34,9 @@ import shutil
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 PACKAGE = Path(__file__).resolve().parent
 _JIT_OPTIONS = {"cache": True, "error_model": "numpy"}
@@ -41,11 +49,35 @@ def jitable(func):
     return register_jitable(**_JIT_OPTIONS)(func)
 
 
-def kernel(func):
-    """``func`` compiled with numba (cached, numpy error model); ``func`` stays as it is."""
+#: Every compiled kernel that Python calls, by ``module.function``: the dispatcher and a
+#: function giving the arguments of an example call (:func:`register`).
+KERNELS: dict[str, tuple[Any, Callable[[], tuple]]] = {}
+
+
+def kernel(func, example: Callable[[], tuple]):
+    """``func`` compiled with numba (cached, numpy error model), registered with ``example``
+    (:func:`register`); ``func`` stays as it is."""
     from numba import njit
 
-    return njit(**_JIT_OPTIONS)(func)
+    return register(njit(**_JIT_OPTIONS)(func), example)
+
+
+def register(dispatcher, example: Callable[[], tuple]):
+    """Register the compiled ``dispatcher`` for :func:`warm_up`; ``example()`` gives the
+    arguments of one call, small and of the types the package calls it with (an argument of
+    another type would compile another version). Returns ``dispatcher``."""
+    func = dispatcher.py_func
+    KERNELS[f"{func.__module__}.{func.__name__}"] = (dispatcher, example)
+    return dispatcher
+
+
+def warm_up() -> None:
+    """Load (or compile) every registered kernel now, under :func:`compile_lock`: each is
+    called once with its example. Only the kernels of modules imported so far are registered
+    (import :mod:`companion.control` first for the whole stack)."""
+    with compile_lock():
+        for dispatcher, example in list(KERNELS.values()):
+            dispatcher(*example())
 
 
 def source_digest(root: Path = PACKAGE) -> str:

@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from companion._jit import jitable, kernel
-from companion.types import Circle, Obstacle
+from companion.types import Circle, Obstacle, Wall
 
 TWO_PI = 2.0 * math.pi
 
@@ -232,6 +232,12 @@ def obstacle_arrays(obstacles: Sequence[Obstacle]) -> ObstacleArrays:
                           np.array(walls, dtype=float).reshape(-1, 4))
 
 
+def sample_obstacles() -> ObstacleArrays:
+    """A moving circle and a wall: the obstacles of the kernels' example calls
+    (:func:`companion._jit.register`)."""
+    return obstacle_arrays([Circle(1.0, 0.5, 0.2, vx=0.1), Wall(0.0, 1.0, 2.0, 1.0)])
+
+
 @jitable
 def min_clearance(px: float, py: float, obstacles: ObstacleArrays, footprint: float,
                   t: float = 0.0) -> float:
@@ -257,7 +263,8 @@ def _path_clearance(xs: np.ndarray, ys: np.ndarray, obstacles: ObstacleArrays,
 
 
 #: Smallest :func:`min_clearance` along the points ``(xs[i], ys[i])`` (compiled).
-path_clearance = kernel(_path_clearance)
+path_clearance = kernel(_path_clearance,
+                        lambda: (np.zeros(2), np.ones(2), sample_obstacles(), 0.0))
 
 
 @jitable
@@ -270,7 +277,8 @@ def _point_clearances(xs: np.ndarray, ys: np.ndarray, obstacles: ObstacleArrays,
 
 
 #: :func:`min_clearance` at each of the points ``(xs[i], ys[i])`` (compiled).
-point_clearances = kernel(_point_clearances)
+point_clearances = kernel(_point_clearances,
+                          lambda: (np.zeros(2), np.ones(2), sample_obstacles(), 0.0))
 
 
 def major_std(cov: np.ndarray) -> float:

@@ -21,7 +21,7 @@ from companion.evaluate.rows import failed
 from companion.evaluate.run import finish, run_suite
 from companion.evaluate.stats import summarize
 from companion.evaluate.suite import Suite, load_suite
-from companion.evaluate.tuning import as_toml, tune_on_suite
+from companion.evaluate.tuning import as_toml, open_storage, tune_on_suite
 from companion.io import CsvWriter, Outputs, atomic_write, save_figure
 
 
@@ -81,12 +81,13 @@ def cmd_tune(args: argparse.Namespace) -> int:
     n = sum(e.controller == args.controller for e in suite.episodes)
     if not n:
         raise UsageError(f"{args.suite}: controllers: expected {args.controller!r} among them")
+    storage = open_storage(args.storage)        # before the progress bar: errors on one line
     print(f"tuning {args.controller} on {suite.name}: {trials} trials of {n} episodes, "
           f"storage {args.storage or 'in memory'}")
     with progress_bar(trials, "trial") as bar:
         def progress(number: int, value: float) -> None:
             bar(min(number + 1, trials))
-        tuned = tune_on_suite(suite, args.controller, trials, args.storage,
+        tuned = tune_on_suite(suite, args.controller, trials, storage,
                               workers=workers, dask=args.dask, seed=seed,
                               progress=progress)
     with Outputs(out, "tune") as stage:

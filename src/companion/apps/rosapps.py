@@ -11,6 +11,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from companion import _jit
 from companion.apps.args import (
     UsageError,
     build_scenario,
@@ -96,9 +97,8 @@ def _node(config, staged: Path | None, limit: float | None, domain_source: str) 
         from companion.ros.node import CompanionNode
         from companion.ros.record import RecordedNode, open_bag
         from companion.ros.spin import spin
-        from companion.sim.runner import warm_up
 
-        warm_up()                  # compile or load the kernels before the first period
+        _jit.warm_up()             # compile or load the kernels before the first period
         bag = open_bag(staged, config) if staged is not None else None
         node = CompanionNode(config, transport) if bag is None \
             else RecordedNode(config, transport, bag)
@@ -151,7 +151,6 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
     from companion.ros.settings import load_node_config
     from companion.ros.sim_robot import SIM_EPOCH_NS, Interrupted, Pacer, run_sim_robot
     from companion.ros.wire import domain_of, open_transport
-    from companion.sim.runner import warm_up
 
     sc = build_scenario(args)
     ros = _ros_overrides(load_node_config(args.ros_params).ros, args)
@@ -164,7 +163,7 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
     wait = number_arg(args.wait, "--wait", "S")
     out = output_dir(Path(args.out or Path("out") / f"sim-robot-{sc.name}"))
     bag = bag_arg(args.bag)
-    warm_up()
+    _jit.warm_up()                     # compile or load the kernels before the first period
     transport = open_transport(ros, "companion_sim_robot", robot=True)
     try:
         with stop_on_signals() as stop:

@@ -90,6 +90,16 @@ def make_controller(name: str, params: Params) -> SafetySupervisor:
     return SafetySupervisor(avoiding(name, params), lookup(name).adjust(params))
 
 
+def check_stack(name: str, params: Params, where: str = "") -> None:
+    """Make the standard stack of ``name`` for ``params`` once, so that LQR weights without a
+    stabilising gain are an error when a file is read; its message (``lqr.q: ...``, a key of
+    the parameters) is prefixed with ``where`` (``file: params.``)."""
+    try:
+        make_controller(name, params)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}{exc}") from None
+
+
 def avoiding(name: str, params: Params) -> AvoidingController:
     """The avoidance layer around the registered controller ``name`` made for ``params``:
     what the safety supervisor wraps."""
@@ -107,5 +117,5 @@ def retune(stack: SafetySupervisor, name: str, params: Params) -> None:
 
 __all__ = ["AvoidingController", "CONTROLLERS", "Controller", "ImpedanceController",
            "LqrController", "PidController", "SafetySupervisor", "VsmController",
-           "lookup", "make_bare", "make_controller", "paper_lqr", "paper_params", "retune",
-           "saturate", "tuned_lqr_params"]
+           "check_stack", "lookup", "make_bare", "make_controller", "paper_lqr", "paper_params",
+           "retune", "saturate", "tuned_lqr_params"]

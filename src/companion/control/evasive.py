@@ -17,7 +17,13 @@ import numpy as np
 
 from companion._jit import jitable, kernel
 from companion.control.risk import robot_path
-from companion.geometry import ObstacleArrays, min_clearance, obstacle_arrays, unicycle_step
+from companion.geometry import (
+    ObstacleArrays,
+    min_clearance,
+    obstacle_arrays,
+    sample_obstacles,
+    unicycle_step,
+)
 from companion.params import Params
 from companion.types import Circle, Obstacle, PersonState, Pose
 
@@ -101,7 +107,10 @@ def rollout_margins(x0: float, y0: float, th0: float, v0: float, w0: float,
     return out
 
 
-_rollout_margins = kernel(rollout_margins)
+_rollout_margins = kernel(rollout_margins, lambda: (
+    0.0, 0.0, 0.0, 0.5, 0.0, np.array([(0.5, 0.0), (0.0, 0.0)]),
+    Rollout(1.0, 1.0, 0.0, 1.0, 0.0, 0.5, 0.5, 0.25, 1.0, 2.0, 0.1, 3, 0.1, 0.1),
+    sample_obstacles()))
 
 
 def evasive_target(robot: Pose, current: tuple[float, float], nominal: tuple[float, float],

@@ -44,7 +44,7 @@ def euler_model(rho: float, alpha: float, beta: float, v: float, omega: float, v
     return augmented(a, b)
 
 
-_euler_model = kernel(euler_model)
+_euler_model = kernel(euler_model, lambda: (1.0, 1.5, 0.0, 1.0, 0.0, 1.0, 0.25, 0.05))
 
 
 def augmented_model(chi, u, w, params: Params) -> tuple[np.ndarray, np.ndarray]:
@@ -91,7 +91,7 @@ class LqrController:
         try:
             self._rest_gains = {params.formation: self.gain(*rest_operating_point(params))}
         except np.linalg.LinAlgError:
-            raise ConfigError(f"lqr.q, lqr.r: no stabilising LQR gain for the slot with "
+            raise ConfigError(f"lqr.q: no stabilising LQR gain for the slot with "
                               f"q = {params.lqr.q}, r = {params.lqr.r} (every weight of q "
                               f"> 0 gives one)") from None
         self.reset()

@@ -86,4 +86,6 @@ def command_risk(x0: float, y0: float, th0: float, v0: float, w0: float, tv: flo
     return collision_risk(xs, ys, step, px, py, ptheta, pv, pomega, cov, accel_std, contact)
 
 
-compiled_command_risk = kernel(command_risk)
+compiled_command_risk = kernel(command_risk, lambda: (
+    0.0, 0.0, 0.0, 0.5, 0.0, 0.5, 0.1, 1.0, 2.0, 0.1, 0.1, 3, 1.0, 1.0, 0.0, 1.0, 0.0,
+    0.01 * np.eye(5), 0.5, 0.6))

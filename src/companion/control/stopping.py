@@ -38,6 +38,7 @@ from companion.geometry import (
     clearance,
     min_clearance,
     obstacle_arrays,
+    sample_obstacles,
 )
 from companion.params import Params
 from companion.types import Obstacle, Pose
@@ -109,7 +110,9 @@ def stop_margins(x0: float, y0: float, th0: float, va0: float, wa0: float,
     return out
 
 
-_stop_margins = kernel(stop_margins)
+_stop_margins = kernel(stop_margins, lambda: (
+    0.0, 0.0, 0.0, 0.5, 0.0, np.array([(0.5, 0.0), (0.0, 0.0)]), plant(Params()),
+    sample_obstacles()))
 
 
 def reach(speed: float, robot: Plant, margin: float) -> float:
@@ -146,7 +149,7 @@ def command_grid(prev_v: float, prev_w: float, robot: Plant) -> np.ndarray:
     return out
 
 
-_command_grid = kernel(command_grid)
+_command_grid = kernel(command_grid, lambda: (0.5, 0.0, plant(Params())))
 
 
 def stop_path_target(target: tuple[float, float], robot: Pose, v_now: tuple[float, float],

@@ -12,19 +12,27 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from companion.config import build, load_toml, reject_unknown
-from companion.control import CONTROLLERS
+from companion.config import MAX_DURATION, build, load_toml, reject_unknown
+from companion.control import CONTROLLERS, make_controller
 from companion.errors import ConfigError
 from companion.evaluate.motions import fixed_sides, motions
 from companion.evaluate.rows import Criterion, criteria_from
-from companion.params import SIDES, Params, SensingParams, load_sensing, params_from_mapping
+from companion.params import (
+    SIDES,
+    Formation,
+    Params,
+    SensingParams,
+    load_sensing,
+    params_from_mapping,
+)
 from companion.sim.faults import faults_from_list
 from companion.sim.recorded import RecordedPerson
 from companion.sim.runner import EpisodeSpec
@@ -35,6 +43,9 @@ TOP = ("name", "description", "reference", "seeds", "controllers", "sensing", "s
 CONTROLLER = ("name", "params", "label")
 #: The suites shipped with companion (``companion evaluate NAME``).
 BUILTIN = Path(__file__).resolve().parent.parent / "suites"
+#: The most episodes a suite may expand to (the largest shipped one has 5,832): beyond it a
+#: number is a typo, and the expansion alone would fill the memory.
+MAX_EPISODES = 100_000
 
 
 @dataclass(frozen=True)
@@ -109,6 +120,9 @@ def suite_from_mapping(data: Mapping[str, Any], path: Path, digest: Any = None) 
     hashlib object already fed with the file, else one fed with ``data``."""
     where = f"{path}: "
     reject_unknown(data, TOP, where)
+    for key in ("name", "description"):
+        if not isinstance(data.get(key, ""), str):
+            raise ConfigError(f"{where}{key}: expected a string, got {data[key]!r}")
     if digest is None:
         digest = hashlib.sha256(repr(sorted(data.items())).encode())
     controllers = _controllers(data.get("controllers", ["lqr"]), path, digest)
@@ -128,15 +142,21 @@ def suite_from_mapping(data: Mapping[str, Any], path: Path, digest: Any = None) 
                           f"got {obstacles!r}")
     duration = data.get("duration")
     if duration is not None and (isinstance(duration, bool)
-                                 or not isinstance(duration, (int, float)) or duration <= 0):
-        raise ConfigError(f"{where}duration: expected a positive number of seconds, got "
-                          f"{duration!r}")
+                                 or not isinstance(duration, (int, float))
+                                 or not 0.0 < duration <= MAX_DURATION):
+        raise ConfigError(f"{where}duration: expected a number of seconds in (0, "
+                          f"{MAX_DURATION:g}], got {duration!r}")
     faults = faults_from_list(data["faults"], f"{where}faults") if "faults" in data else ()
     criteria = criteria_from(data["criteria"], f"{where}criteria") if "criteria" in data else ()
+    moves = motions(data.get("motions", {"scenarios": ["figure8"]}), path, digest, _resolve)
+    total = sum(len(fixed_sides(m, sides)) for m in moves) * len(sensing) * len(seeds) \
+        * len(controllers)
+    if total > MAX_EPISODES:
+        raise ConfigError(f"{where}expected at most {MAX_EPISODES} episodes, got {total} "
+                          f"(motions x sides x sensing x seeds x controllers)")
     episodes = []
     final: dict[tuple, Params] = {}     # validated once per group, controller, side, sensing
-    for m, motion in enumerate(motions(data.get("motions", {"scenarios": ["figure8"]}), path,
-                                       digest, _resolve)):
+    for m, motion in enumerate(moves):
         group, base, build = motion.group, motion.base, motion.build
         for side_name, bearing in fixed_sides(motion, sides):
             for sensing_name, sensing_params in sensing:
@@ -145,12 +165,14 @@ def suite_from_mapping(data: Mapping[str, Any], path: Path, digest: Any = None) 
                     for label, name, overrides in controllers:
                         key = (group, label, side_name, sensing_name)
                         if key not in final:
-                            p = base(label, overrides)
-                            final[key] = p.replace(
-                                sensing=sensing_params,
-                                formation=dataclasses.replace(
-                                    p.formation, bearing=p.formation.bearing
-                                    if bearing is None else bearing))
+                            final[key] = _final(partial(base, label, overrides), name, bearing,
+                                                sensing_params,
+                                                _factors(where, sides, side_name, sensing,
+                                                         sensing_name, controllers, label))
+                        if duration is not None and duration < final[key].dt:
+                            raise ConfigError(f"{where}duration: expected at least one sample "
+                                              f"period (params.dt = {final[key].dt:g} s), got "
+                                              f"{duration!r}")
                         spec = build(label, overrides, name)
                         spec = dataclasses.replace(
                             spec, params=final[key], seed=episode_seed,
@@ -166,6 +188,32 @@ def suite_from_mapping(data: Mapping[str, Any], path: Path, digest: Any = None) 
                           f"named twice, or two files of one name")
     return Suite(str(data.get("name", path.stem)), str(data.get("description", "")), reference,
                  tuple(episodes), digest.hexdigest(), criteria)
+
+
+def _final(base: Callable[[], Params], controller: str, bearing: float | None,
+           sensing: SensingParams, where: str) -> Params:
+    """An episode's parameters: the motion's with a controller's overrides (``base()``) and
+    the suite's sensing and side (``bearing``; None: the motion's own). A combination that
+    the checks across sections refuse, or whose ``controller`` cannot be made (LQR weights
+    without a stabilising gain), raises naming ``where``."""
+    try:
+        p = base()
+        p = p.replace(sensing=sensing, formation=dataclasses.replace(
+            p.formation, bearing=p.formation.bearing if bearing is None else bearing))
+        make_controller(controller, p)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: {exc}") from None
+    return p
+
+
+def _factors(where: str, sides: list, side: str, sensing: list, sensing_name: str,
+             controllers: list, label: str) -> str:
+    """``file: sides[i], sensing[j], controllers[k]``: the keys that make one combination (a
+    side the motion fixes itself is named as it)."""
+    names = [s[0] for s in sides]
+    at = f"sides[{names.index(side)}]" if side in names else f"side {side!r}"
+    return (f"{where}{at}, sensing[{[s[0] for s in sensing].index(sensing_name)}], "
+            f"controllers[{[c[0] for c in controllers].index(label)}]")
 
 
 def track_episode(person: RecordedPerson, params: Params, controller: str = "lqr",
@@ -281,12 +329,21 @@ def _side(value: Any, where: str) -> tuple[str, float | None]:
             raise ConfigError(f"{where}: expected one of {', '.join(SIDES)}, {OWN_SIDE!r} or a "
                               f"bearing in rad, got {value!r}")
         return value, SIDES.get(value)
-    return f"{_number(value, where):.4f}", float(value)
+    bearing = _number(value, where)
+    check = {f.name: f for f in dataclasses.fields(Formation)}["bearing"].metadata["check"]
+    problem = check(bearing)
+    if problem:
+        raise ConfigError(f"{where}: expected {problem}, got {value!r}")
+    return f"{bearing:.4f}", bearing
 
 
 def _seeds(value: Any, where: str) -> list[int]:
-    if isinstance(value, int) and not isinstance(value, bool):
-        return list(range(_count(value, where)))
+    if not isinstance(value, (list, tuple)):
+        if isinstance(value, bool) or not isinstance(value, int) \
+                or not 1 <= value <= MAX_EPISODES:
+            raise ConfigError(f"{where}: expected an integer in [1, {MAX_EPISODES}] or a list "
+                              f"of seeds, got {value!r}")
+        return list(range(value))
     seeds = _list(value, where)
     for i, s in enumerate(seeds):
         if isinstance(s, bool) or not isinstance(s, int) or s < 0:
@@ -297,12 +354,6 @@ def _seeds(value: Any, where: str) -> list[int]:
 def _list(value: Any, where: str) -> Sequence:
     if isinstance(value, (str, Mapping)) or not isinstance(value, (list, tuple)) or not value:
         raise ConfigError(f"{where}: expected a non-empty list, got {value!r}")
-    return value
-
-
-def _count(value: Any, where: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ConfigError(f"{where}: expected an integer >= 1, got {value!r}")
     return value
 
 

@@ -128,7 +128,37 @@ class Tuned:
     history: tuple[tuple[int, float], ...]   # (trial number, J) of every finished trial
 
 
-def tune_on_suite(suite: Suite, controller: str, trials: int, storage: str | None = None,
+def _optuna() -> Any:
+    try:
+        import optuna
+    except ImportError:
+        raise ConfigError("--suite: tuning needs optuna (pip install -e '.[tune]')") from None
+    return optuna
+
+
+def _reason(exc: BaseException) -> str:
+    """The first line of what went wrong (SQLAlchemy: its driver's error, without the
+    'Background on this error' line)."""
+    orig = getattr(exc, "orig", None)
+    text = str(orig if isinstance(orig, BaseException) else exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def open_storage(storage: Any) -> Any:
+    """The Optuna storage of the URL ``storage`` (``sqlite:///study.db``), opened now; None
+    (in memory) and storage objects as given. A URL that cannot be opened (a bad URL, a
+    folder that does not exist, a database that is a folder) raises a one-line ConfigError
+    naming it."""
+    if not isinstance(storage, str):
+        return storage
+    optuna = _optuna()
+    try:
+        return optuna.storages.RDBStorage(storage)
+    except Exception as exc:        # optuna and SQLAlchemy raise many kinds for a bad URL
+        raise ConfigError(f"--storage {storage}: cannot open it ({_reason(exc)})") from None
+
+
+def tune_on_suite(suite: Suite, controller: str, trials: int, storage: Any = None,
                   study_name: str | None = None, workers: int | None = None,
                   dask: str | None = None, seed: int = 0,
                   progress: Callable[[int, float], None] | None = None,
@@ -136,11 +166,9 @@ def tune_on_suite(suite: Suite, controller: str, trials: int, storage: str | Non
     """Optuna's TPE sampler (seeded) over ``dims`` (default: :data:`SPACES` of
     ``controller``), each trial the suite's episodes of that controller (its other
     controllers are ignored), until the study holds ``trials`` finished trials.
+    ``storage``: a URL or a storage of :func:`open_storage` (None: in memory).
     ``progress(trial number, its J)`` after each."""
-    try:
-        import optuna
-    except ImportError:
-        raise ConfigError("--suite: tuning needs optuna (pip install -e '.[tune]')") from None
+    optuna = _optuna()
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     dims = tuple(dims or SPACES[controller])
     specs = [e.spec for e in suite.episodes if e.controller == controller]
@@ -149,12 +177,14 @@ def tune_on_suite(suite: Suite, controller: str, trials: int, storage: str | Non
     base = specs[0].params
     space = "-".join(dict.fromkeys(d.section for d in dims))
     name = study_name or f"companion-{controller}-{space}-{suite.digest[:16]}"  # per suite
+    url = storage
+    storage = open_storage(storage)
     try:
         study = optuna.create_study(study_name=name, storage=storage, load_if_exists=True,
                                     direction="minimize",
                                     sampler=optuna.samplers.TPESampler(seed=seed))
-    except Exception as exc:        # optuna raises many kinds for a bad storage URL
-        raise ConfigError(f"--storage: {exc}") from None
+    except Exception as exc:        # optuna raises many kinds for a storage it cannot use
+        raise ConfigError(f"--storage {url}: {_reason(exc)}") from None
     complete = optuna.trial.TrialState.COMPLETE
     if not any(t.state == complete for t in study.trials):   # the current gains first
         study.enqueue_trial({d.name: v for d, v in zip(dims, current(base, dims))})

@@ -18,6 +18,9 @@ from companion.params import ExtractorParams
 from companion.types import Circle, Scan
 
 _COVER_EPS = 1e-9  # m added to covering radii so that round-off never leaves a point outside
+# m: no planar LiDAR measures farther (long-range ones reach a few hundred metres); a range
+# beyond it is a driver's "no return" (FLT_MAX, 1e20), whatever the scan's range_max says
+PHYSICAL_RANGE_MAX = 1000.0
 
 
 def _clusters(scan: Scan, gap: float, breakpoint_angle: float
@@ -173,9 +176,10 @@ def checked_scan(scan: object, range_max: float = math.inf) -> Scan | None:
 
     Invalid: angles and ranges that are not 1-D arrays of numbers of the same length, an
     angle or the sensor pose not finite. Per beam: above the sensor's ``range_max`` (or
-    ``range_max`` given here when the scan's is not finite; FLT_MAX and 1e20 included) is
-    ``inf``, "no return"; NaN or a finite range below ``range_min`` is NaN, an invalid beam;
-    ``-inf`` stays "closer than the sensor can measure" (ROS REP 117).
+    ``range_max`` given here when the scan's is not finite), and always above
+    :data:`PHYSICAL_RANGE_MAX` (1 km; FLT_MAX and 1e20 included), is ``inf``, "no return";
+    NaN or a finite range below ``range_min`` is NaN, an invalid beam; ``-inf`` stays
+    "closer than the sensor can measure" (ROS REP 117).
     """
     try:
         angles = np.asarray(scan.angles, dtype=float)
@@ -188,7 +192,7 @@ def checked_scan(scan: object, range_max: float = math.inf) -> Scan | None:
     if angles.ndim != 1 or angles.shape != ranges.shape \
             or not all(math.isfinite(v) for v in pose) or not np.all(np.isfinite(angles)):
         return None
-    high = high if math.isfinite(high) else range_max
+    high = min(high if math.isfinite(high) else range_max, PHYSICAL_RANGE_MAX)
     low = low if math.isfinite(low) and low >= 0.0 else 0.0
     with np.errstate(invalid="ignore"):
         ranges[ranges > high] = math.inf
@@ -205,7 +209,9 @@ def extract_obstacles(scan: Scan, person: tuple[float, float] | None,
     scan : Scan
         A LiDAR scan (:func:`companion.sim.lidar.cast` or hand-made), read by
         :func:`checked_scan` (an invalid scan gives no obstacles); ``inf`` and NaN ranges
-        count as "no return".
+        count as "no return", and so does any range beyond ``range_max`` or beyond
+        :data:`PHYSICAL_RANGE_MAX` (1 km: FLT_MAX, 1e20) even when ``range_max`` is left
+        infinite.
     person : (float, float) or None
         Tracked position of the person; circles centred near it are left out. ``None`` (or a
         position that is not finite) reports everything.

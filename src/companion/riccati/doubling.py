@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from companion._jit import register
 from companion.riccati.reference import RADIUS_MARGIN
 
 #: Doubling stops when the update of P is below this times max|P| (quadratic convergence:
@@ -343,6 +344,12 @@ def dare_gain(a, b, q_diag, r_diag, p, k):
         return GAIN_FAILED, iterations
     _closed_loop(a, b, k, ws[0])
     return _radius_status(ws[0], 1.0 - RADIUS_MARGIN, ws[1], ws[2], NX), iterations
+
+
+register(_radius_status, lambda: (0.5 * np.eye(NX), 0.9, np.empty((NX, NX)),
+                                  np.empty((NX, NX)), NX))
+register(dare_gain, lambda: (0.9 * np.eye(NX), np.ones((NX, NU)), np.ones(NX), np.ones(NU),
+                             np.empty((NX, NX)), np.empty((NU, NX))))
 
 
 def spectral_radius_below(m, bound: float) -> bool:

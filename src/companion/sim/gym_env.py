@@ -2,10 +2,11 @@
 
 A thin adapter over :class:`companion.sim.episode.Simulator`: the action is the velocity
 command ``(v, omega)`` sent to the base (m/s, rad/s; no safety layer in between, wrap one if
-the policy needs it); the observation is what a robot's detector and odometry give, in the
-robot frame (:data:`OBSERVATION`); the reward is minus the slot error of the step (m). An
-episode terminates on a contact with the person or an obstacle and is truncated at the
-scenario's duration. ``info`` carries the step's log row (``info["row"]``, the
+the policy needs it; outside the action space it is clipped, and a wrong shape or a
+non-finite entry raises ValueError); the observation is what a robot's detector and
+odometry give, in the robot frame (:data:`OBSERVATION`); the reward is minus the slot error
+of the step (m). An episode terminates on a contact with the person or an obstacle and is
+truncated at the scenario's duration. ``info`` carries the step's log row (``info["row"]``, the
 :data:`companion.types.LOG_COLUMNS` defined at that step: no estimate, as the action carries
 none, nor obstacle clearance without obstacles) and the simulator's own observation
 (``info["observation"]``), so a controller of :mod:`companion.control` can be run as a
@@ -70,8 +71,16 @@ class FollowEnv(gym.Env):
                                    "start_velocity": self._sim.start_velocity}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        v, omega = np.clip(np.asarray(action, dtype=float), self.action_space.low,
-                           self.action_space.high)
+        """One sample under ``action``, an array of shape (2,) of finite numbers: a wrong shape
+        or a NaN/inf entry raises ValueError (nothing is simulated); entries outside
+        :attr:`action_space` are clipped to it, as the base's limits would."""
+        a = np.asarray(action, dtype=float)
+        if a.shape != self.action_space.shape:
+            raise ValueError(f"action: expected shape {self.action_space.shape} (v, omega), "
+                             f"got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action: (v, omega) must be finite, got {a.tolist()}")
+        v, omega = np.clip(a, self.action_space.low, self.action_space.high)
         obs = self._sim.step(Command(float(v), float(omega)))
         numbers = log_row(self._sim.sample, StepReport(), self.params)
         row = {k: x for k, x in zip(LOG_COLUMNS, numbers) if not math.isnan(x)}

@@ -9,26 +9,29 @@ draws its noise from its own seed, so the results do not depend on the number of
 
 from __future__ import annotations
 
+import ctypes
 import math
 import multiprocessing
 import os
 import signal
 import sys
+import threading
+import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Any, NamedTuple
 
-from companion._jit import compile_lock
+from companion import _jit
 from companion.control import make_controller
 from companion.errors import ConfigError
 from companion.params import Params
 from companion.sim.episode import BLOCK_ROWS, episode_blocks
 from companion.sim.faults import Fault
-from companion.sim.person import PersonMotion, line
+from companion.sim.person import PersonMotion
 from companion.sim.sensing import make_perception
-from companion.types import Circle, Log, Obstacle, Pose
+from companion.types import Log, Obstacle, Pose
 
 
 @dataclass(frozen=True)
@@ -72,12 +75,10 @@ def default_workers() -> int:
 
 
 def warm_up() -> None:
-    """Load (or compile) the compiled kernels of the stack in this process, so that worker
-    processes forked from it inherit them instead of each loading them: a few steps of the
-    full stack with an obstacle and a LiDAR, under the cache's compile lock."""
-    with compile_lock():
-        run_one(EpisodeSpec("lqr", line((0.0, 0.0, 0.0), 1.0), Params(), 0.2,
-                            obstacles=(Circle(1.5, 1.2, 0.3),), obstacle_source="lidar"))
+    """Load (or compile) the compiled kernels of the stack in this process
+    (:func:`companion._jit.warm_up`), so that worker processes forked from it inherit them
+    instead of each loading them."""
+    _jit.warm_up()
 
 
 class WithSpec(NamedTuple):
@@ -132,7 +133,7 @@ def run_many(specs: Sequence[EpisodeSpec], workers: int | None = None,
     # fork (Linux) hands the workers the loaded kernels; elsewhere the platform's default
     context = multiprocessing.get_context("fork") if sys.platform.startswith("linux") else None
     pool = ProcessPoolExecutor(max_workers=min(workers, len(specs)), mp_context=context,
-                               initializer=_worker_signals)
+                               initializer=_worker_init, initargs=(os.getpid(),))
     try:
         for result in pool.map(job, specs, chunksize=chunk):
             results.append(result)
@@ -160,7 +161,7 @@ def run_unordered(specs: Sequence[EpisodeSpec], workers: int | None,
     warm_up()
     context = multiprocessing.get_context("fork") if sys.platform.startswith("linux") else None
     pool = ProcessPoolExecutor(max_workers=min(workers, len(specs)), mp_context=context,
-                               initializer=_worker_signals)
+                               initializer=_worker_init, initargs=(os.getpid(),))
     try:
         futures = {pool.submit(func, spec): i for i, spec in enumerate(specs)}
         for future in as_completed(futures):
@@ -171,10 +172,45 @@ def run_unordered(specs: Sequence[EpisodeSpec], workers: int | None,
     pool.shutdown()
 
 
-def _worker_signals() -> None:
-    """Workers leave Ctrl-C to the parent and die on SIGTERM (the parent stops them)."""
+def _worker_init(parent: int) -> None:
+    """Workers leave Ctrl-C to the parent, die on SIGTERM (the parent stops them) and die
+    with the parent process ``parent`` (a SIGKILLed parent cannot stop them)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    die_with_parent(parent)
+
+
+#: prctl option: the signal this process gets when its parent dies (linux/prctl.h).
+_PR_SET_PDEATHSIG = 1
+#: How often (s) a worker without PR_SET_PDEATHSIG checks that its parent lives.
+PARENT_POLL = 1.0
+
+
+def die_with_parent(parent: int) -> None:
+    """Make this process die when its parent process ``parent`` dies.
+
+    Linux: ``prctl(PR_SET_PDEATHSIG, SIGKILL)``, at once. Elsewhere (or if prctl fails): a
+    daemon thread that checks every :data:`PARENT_POLL` s whether the parent changed
+    (``os.getppid()``: an orphan is adopted by another process) and then ends the process
+    (``os._exit(1)``). On Linux the signal comes
+    when the *thread* that started this process ends, so a pool must be made, and used up,
+    by one thread, as :func:`run_many` and :func:`run_unordered` do."""
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            if libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0:
+                if os.getppid() != parent:          # it died before prctl was set
+                    os.kill(os.getpid(), signal.SIGKILL)
+                return
+        except (OSError, AttributeError):           # no libc or no prctl: poll instead
+            pass
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(PARENT_POLL)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="die-with-parent", daemon=True).start()
 
 
 def _stop(pool: ProcessPoolExecutor) -> None:

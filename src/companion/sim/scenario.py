@@ -63,7 +63,7 @@ from companion.config import (
     positive,
     reject_unknown,
 )
-from companion.control import lookup
+from companion.control import check_stack, lookup
 from companion.errors import ConfigError
 from companion.model import relative_state
 from companion.params import LEFT, RIGHT, Params, params_from_mapping, sensing_params
@@ -353,6 +353,7 @@ def scenario_from_mapping(data: Mapping[str, Any], source: str, base_dir: Path,
             params = params.replace(sensing=sensing)
         except ConfigError as exc:        # a check across sections
             raise ConfigError(f"{where}{exc}") from None
+    check_stack(controller, params, f"{where}params.")   # LQR weights without a gain
     if spec is not None:
         check_turn_rate(spec, params.tracker.max_person_turn_rate, where)
     else:

@@ -245,5 +245,12 @@ def imm_update(xs: np.ndarray, ps: np.ndarray, mu: np.ndarray, z: np.ndarray, r:
     return xn, pn, m, x, p
 
 
-compiled_predict = kernel(imm_predict)
-compiled_update = kernel(imm_update)
+def _example_belief() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Two models' states, covariances and probabilities: the kernels' example arguments."""
+    return np.zeros((2, 5)), np.tile(np.eye(5), (2, 1, 1)), np.array((0.9, 0.1))
+
+
+compiled_predict = kernel(imm_predict, lambda: (
+    *_example_belief(), 0.05, np.array(((0.5, 0.5), (1.0, 1.0))), 0.1, 0.5))
+compiled_update = kernel(imm_update, lambda: (
+    *_example_belief(), np.zeros(2), 0.01 * np.eye(2), False, False, 3.0, 3.0))
