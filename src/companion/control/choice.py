@@ -21,8 +21,9 @@ from companion.control.stages import Step
 from companion.params import Params
 from companion.types import PersonEstimate
 
-#: The controlled stop before a search has brought the robot this close to rest (m/s, rad/s).
-AT_REST = (0.05, 0.1)
+#: The controlled stop before a search has brought the robot to rest: both commands at most
+#: this (m/s, rad/s; the rate limits end a stop at exactly zero).
+AT_REST = (1e-9, 1e-9)
 
 
 class Choosing:
