@@ -40,7 +40,9 @@ class FollowEnv(gym.Env):
     """Walk beside the person of a built-in ``scenario`` (or a scenario TOML file) under the
     ``sensing`` profile (a name of :data:`companion.params.PROFILES` or a sensing TOML file),
     with the scenario's
-    obstacles known exactly (``obstacles="truth"``) or as the simulated LiDAR sees them."""
+    obstacles known exactly (``obstacles="truth"``) or as the simulated LiDAR sees them (the
+    raw scan in ``info["observation"].scan``; :class:`companion.perception.front_end.FrontEnd`
+    turns scans into obstacles as the standard stack does)."""
 
     metadata = {"render_modes": []}
 
