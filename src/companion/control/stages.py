@@ -45,7 +45,7 @@ from companion.types import (
 )
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(slots=True)
 class Step:
     """The context of one step, filled in by the stages in order."""
 

@@ -51,7 +51,16 @@ class SafetySupervisor:
         self._driving = Driving(inner)
         self._guard = Guarding(params)
         self._limits = Limiting(params)
+        self._stages()
         self.reset()
+
+    def _stages(self) -> None:
+        """The pipeline's stages in order, with their names in the report: those that read
+        the inputs, then (the rate limits started from a measured velocity) those that act."""
+        self._inputs = (("clock", self._clock), ("tracking", self._tracking),
+                        ("inputs", self._checks))
+        self._actions = (("choice", self._choice), ("controller", self._driving),
+                         ("keepout", self._guard))
 
     @property
     def inner(self) -> Controller:
@@ -68,15 +77,15 @@ class SafetySupervisor:
     def step(self, obs: Observation) -> Command:
         s = Step(obs, self._choice.in_force, self._limits.prev)
         raised: list[tuple[str, str]] = []
-        for name, stage in (("clock", self._clock), ("tracking", self._tracking),
-                            ("inputs", self._checks)):
-            raised += [(name, r) for r in stage(s)]
+        for name, stage in self._inputs:
+            for r in stage(s):
+                raised.append((name, r))
         if s.measured and not self._limits.started:   # limits start from the measured velocity
             self._limits.start(*s.velocity)
             s.prev = self._limits.prev
-        for name, stage in (("choice", self._choice), ("controller", self._driving),
-                            ("keepout", self._guard)):
-            raised += [(name, r) for r in stage(s)]
+        for name, stage in self._actions:
+            for r in stage(s):
+                raised.append((name, r))
         final = self._limits(s)
         if s.fresh:
             self.delays.sent(obs.t, self._limits.prev)
@@ -113,6 +122,7 @@ class SafetySupervisor:
         prev, started = self._limits.prev, self._limits.started
         self._limits = Limiting(params)
         self._limits.prev, self._limits.started = prev, started
+        self._stages()
 
     @property
     def reidentify(self) -> Reidentify | None:

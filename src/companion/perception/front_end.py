@@ -111,10 +111,10 @@ class OdometrySource(Source):
         self.samples: deque[OdometrySample] = deque()
 
     def add(self, t: float, pose: Pose, velocity: tuple[float, float] | None) -> None:
-        finite = all(math.isfinite(a) for a in (pose.x, pose.y, pose.theta))
+        finite = math.isfinite(pose.x) and math.isfinite(pose.y) and math.isfinite(pose.theta)
         if finite and self.take(t):
-            v = velocity if velocity is not None and all(map(math.isfinite, velocity)) \
-                else (0.0, 0.0)
+            v = velocity if velocity is not None and math.isfinite(velocity[0]) \
+                and math.isfinite(velocity[1]) else (0.0, 0.0)
             self.samples.append(OdometrySample(t, pose, v))
         while self.samples and self.samples[0].t < t - self.horizon_s:
             self.samples.popleft()
@@ -168,6 +168,8 @@ class PeopleSource(Source):
         self.movers.reset()
 
     def update(self, detections: Sequence[PersonDetection]) -> None:
+        if not detections:
+            return
         for t in sorted({d.t for d in detections}):
             if self.take(t):
                 self.movers.update([Circle(d.x, d.y, self.radius)
