@@ -27,19 +27,20 @@ from typing import Any
 import numpy as np
 import scipy
 
-from companion.evaluate.rows import summary_row
 from companion.evaluate.suite import Suite
 from companion.sim.runner import EpisodeSpec, run_unordered
 
 PARTIAL = ".evaluate.partial"
 
 
-def run_suite(suite: Suite, out: Path, workers: int | None = None, dask: str | None = None,
-              progress: Callable[[int, int], None] | None = None) -> list[dict]:
+def run_suite(suite: Suite, out: Path | None, workers: int | None = None,
+              dask: str | None = None, progress: Callable[[int, int], None] | None = None
+              ) -> list[dict]:
     """One row per episode of ``suite`` (its factors, ``episode``, ``pair`` and its
     numbers), in the suite's order; the episodes kept under ``out`` from an earlier call are
-    not run again. ``dask``: None (local worker processes), ``"local"`` (a Dask LocalCluster
-    on 127.0.0.1) or a scheduler address. ``progress(done, total)`` after each episode."""
+    not run again (None: nothing kept). ``dask``: None (local worker processes), ``"local"``
+    (a Dask LocalCluster on 127.0.0.1) or a scheduler address. ``progress(done, total)``
+    after each episode."""
     return suite_rows(suite, dict(zip((e.key for e in suite.episodes),
                                       run_results(suite, out, workers, dask, progress))))
 
@@ -95,9 +96,7 @@ def run_all(suite: Suite, workers: int | None = None, dask: str | None = None,
             progress: Callable[[int], None] | None = None) -> list[dict]:
     """The rows of :func:`run_suite` without keeping anything on disk (benches, tests);
     ``progress(done)``."""
-    results = run_results(suite, None, workers, dask,
-                          progress and (lambda done, total: progress(done)))
-    return suite_rows(suite, {e.key: r for e, r in zip(suite.episodes, results)})
+    return run_suite(suite, None, workers, dask, progress and (lambda done, total: progress(done)))
 
 
 def suite_rows(suite: Suite, results: dict[str, dict]) -> list[dict]:
@@ -105,20 +104,6 @@ def suite_rows(suite: Suite, results: dict[str, dict]) -> list[dict]:
     (``results`` by episode key)."""
     return [{**e.factors, "episode": e.key, "pair": e.pair, **results[e.key]}
             for e in suite.episodes]
-
-
-def run_episodes(specs: Sequence[EpisodeSpec], workers: int | None = None,
-                 dask: str | None = None, reduce: Callable[[EpisodeSpec], Any] = summary_row,
-                 progress: Callable[[int], None] | None = None) -> list:
-    """``reduce(spec)`` (a picklable function: by default the episode's row, or
-    :func:`~companion.evaluate.rows.row_and_log`) of every spec, in order, on the backend of
-    :func:`run_suite`; ``progress(done)`` after each episode."""
-    out: list = [None] * len(specs)
-    for n, (i, result) in enumerate(_backend(dask, workers, specs, reduce), 1):
-        out[i] = result
-        if progress:
-            progress(n)
-    return out
 
 
 def finish(out: Path) -> None:
