@@ -2,8 +2,9 @@
 fig4.gif), Fig. 7 and Table 3 (with realistic sensing, :mod:`companion.apps.table3`), side by
 side.
 
-Every number comes from a simulation run here; the paper's published Table 2 is kept beside
-ours for comparison (:data:`PAPER_TABLE2`, in the paper's units).
+Every number comes from a simulation run here, as two suites of the evaluate engine
+(:func:`runs`); the paper's published Table 2 is kept beside ours for comparison
+(:data:`PAPER_TABLE2`, in the paper's units).
 """
 
 from __future__ import annotations
