@@ -11,20 +11,19 @@ from __future__ import annotations
 
 from threadpoolctl import threadpool_limits
 
-from companion import metrics
-from companion.sim.runner import run_many
-from companion.sim.scenario import load_scenario
+from companion.evaluate.generators import scenario_episodes, suite_of
+from companion.evaluate.run import run_all
 
 
 def main() -> None:
-    runs = [(name, source, ctl) for name in ("fig4", "fig7", "corridor")
-            for source in ("truth", "lidar") for ctl in ("lqr", "lqr-paper")]
-    results = run_many([load_scenario(name).episode(ctl, source) for name, source, ctl in runs],
-                       summarize=metrics.compute)
+    suite = suite_of("obstacles", (e for name in ("fig4", "fig7", "corridor")
+                                   for source in ("truth", "lidar")
+                                   for e in scenario_episodes(name, ["lqr", "lqr-paper"], source)))
     print(f"{'scenario':9s} {'obstacles':9s} {'controller':10s} {'collisions':>10s} "
           f"{'clearance':>9s} {'person':>7s} {'rmse rho':>9s} {'rmse alpha':>10s}")
-    for (name, source, ctl), m in zip(runs, results):
-        print(f"{name:9s} {source:9s} {ctl:10s} {m['obstacle_collisions']:>10d} "
+    for e, m in zip(suite.episodes, run_all(suite)):
+        name, source = e.motion.split("+")
+        print(f"{name:9s} {source:9s} {e.controller:10s} {int(m['obstacle_collisions']):>10d} "
               f"{m['min_obstacle_clearance_m']:>8.3f}m "
               f"{m['min_person_distance_m']:>6.2f}m {m['rmse_rho_m'] * 100:>7.1f}cm "
               f"{m['rmse_alpha_rad']:>10.3f}")

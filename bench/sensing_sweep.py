@@ -33,7 +33,8 @@ import numpy as np
 
 from companion.config import load_toml
 from companion.data import pedestrians
-from companion.evaluate.run import run_episodes
+from companion.evaluate.generators import suite_of
+from companion.evaluate.run import run_all
 from companion.evaluate.suite import Suite, suite_from_mapping, suite_path
 from companion.io import save_figure, write_csv
 
@@ -114,10 +115,12 @@ def main() -> None:
     print(f"{len(sweep.episodes)} + {len(episodes)} episodes (the sensing-sweep suite, the "
           f"other controllers of sensing-corners)")
     t0 = time.perf_counter()
-    results = run_episodes([e.spec for e in sweep.episodes + tuple(episodes)], args.workers)
+    both = suite_of("sensing-sweep+corners", (*sweep.episodes, *episodes),
+                    parts=(sweep.digest, corners.digest))
+    results = run_all(both, args.workers)
     grouped: dict[tuple[str, str], list[dict]] = {}
-    for e, r in zip(sweep.episodes + tuple(episodes), results):
-        grouped.setdefault((e.controller, e.sensing), []).append(r)
+    for r in results:
+        grouped.setdefault((r["controller"], r["sensing"]), []).append(r)
     rows = [row(c, label, runs) for (c, label), runs in grouped.items()]
     print(f"{len(results)} runs in {time.perf_counter() - t0:.0f} s\n")
     print(f"{'controller':10s} {'cell':24s} {'slot cm':>8s} {'p90':>6s} {'floor':>6s} "

@@ -35,11 +35,12 @@ from scipy.stats import chi2
 
 from companion.data import pedestrians
 from companion.errors import CompanionError
-from companion.evaluate import walkers
+from companion.evaluate import fuzz_runs, walkers
+from companion.evaluate.generators import suite_of
+from companion.evaluate.run import run_results
 from companion.params import IDEAL, REALISTIC, Params, load_params
-from companion.sim import fuzz
 from companion.sim.recorded import RecordedPerson
-from companion.sim.runner import run_many
+from companion.sim.runner import EpisodeSpec, run_one
 from companion.sim.sensing import PersonSensor, streams
 from companion.tracking import PersonTracker
 
@@ -53,6 +54,11 @@ def errors(log) -> np.ndarray:
     s = log["person_est_std"]
     ok = np.isfinite(e) & np.isfinite(s) & (s > 0.0)
     return np.stack([e[ok], s[ok]])
+
+
+def closed_loop(spec: EpisodeSpec) -> np.ndarray:
+    """Run one episode of the engine: its :func:`errors`."""
+    return errors(run_one(spec))
 
 
 def report(name: str, parts: list[np.ndarray]) -> None:
@@ -129,12 +135,14 @@ def main() -> None:
     if args.open_loop_only:
         return
     suite = walkers.tracks_suite(["lqr"], ["realistic"], every=args.every)
-    specs = [dataclasses.replace(e.spec, params=params.replace(
-        formation=e.spec.params.formation)) for e in suite.episodes]
-    report(f"ETH/UCY walkers ({len(specs)} runs)", run_many(specs, summarize=errors))
-    drawn = [fuzz.draw(seed, "lqr", "realistic", base) for seed in range(args.episodes)]
+    tracks = suite_of("tracker-tracks", (dataclasses.replace(e, spec=dataclasses.replace(
+        e.spec, params=params.replace(formation=e.spec.params.formation)))
+        for e in suite.episodes), closed_loop)
+    report(f"ETH/UCY walkers ({len(tracks.episodes)} runs)", run_results(tracks))
+    drawn, _ = fuzz_runs.fuzz_suite([(seed, "lqr", "realistic") for seed in range(args.episodes)],
+                                    base)
     report(f"fuzz walkers ({args.episodes} episodes)",
-           run_many([spec for _, spec in drawn], summarize=errors))
+           run_results(dataclasses.replace(drawn, row=closed_loop)))
     print(f"\nData: {pedestrians.CREDIT}")
 
 

@@ -42,7 +42,7 @@ def _work(*args, **kwargs):
 
 @pytest.fixture
 def no_work(monkeypatch):
-    for owner, name in [(commands, "stream_one"), (soak, "run_soak"),
+    for owner, name in [(commands, "stream_one"), (commands, "run_results"), (soak, "run_soak"),
                         (evaluation, "load_suite"), (benchmark, "run"),
                         (suites, "suite_from_mapping"), (suites, "evaluate"),
                         (reproduce, "reproduce"), (pedestrians, "load_scenes")]:

@@ -266,9 +266,9 @@ def test_tuning_on_a_suite_improves_resumes_and_writes_a_params_file(tmp_path, c
     printed = capsys.readouterr().out
     start = float(printed.split("J: current parameters ")[1].split(",")[0])
     # the first trial is the current gains: its J is the suite's objective with them
-    from companion.evaluate.run import run_episodes
+    from companion.evaluate.run import run_all
     from companion.evaluate.tuning import objective
-    direct = objective(run_episodes([e.spec for e in load_suite(path).episodes], 1))
+    direct = objective(run_all(load_suite(path), 1))
     assert start == pytest.approx(direct, abs=5e-5)
     trials = (tmp_path / "out" / "trials.csv").read_text().splitlines()
     assert len(trials) == 1 + 3

@@ -3,17 +3,16 @@ run of every controller with ideal and realistic sensing (``companion fuzz`` run
 steps; docs/safety.md)."""
 
 import math
-from functools import partial
 
 import numpy as np
 import pytest
 
 from companion.control import CONTROLLERS
+from companion.evaluate import fuzz_runs
 from companion.geometry import obstacle_arrays, path_clearance
 from companion.params import PROFILES, Params
 from companion.sim import fuzz
 from companion.sim.episode import nearest_clearance, start_in_slot
-from companion.sim.runner import WithSpec, run_many
 from companion.types import LOG_COLUMNS, Log, PersonState
 
 SEEDS = range(40)
@@ -169,10 +168,7 @@ SHORT_STEPS = 20_000
 @pytest.fixture(scope="module")
 def short_run():
     episodes = fuzz.plan(SHORT_STEPS, 0, list(CONTROLLERS), list(fuzz.FUZZ_PROFILES))
-    drawn = [fuzz.draw(*e) for e in episodes]
-    counts = run_many([spec for _, spec in drawn],
-                      summarize=WithSpec(partial(fuzz.spec_counts, params=Params())))
-    return [case for case, _ in drawn], counts
+    return fuzz_runs.run(episodes, None)           # the engine, as companion fuzz runs it
 
 
 def test_short_fuzz_covers_every_pair_and_stays_finite(short_run):

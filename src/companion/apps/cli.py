@@ -93,7 +93,9 @@ def parser() -> argparse.ArgumentParser:
 
     rp = sub.add_parser("reproduce", help="the paper's Fig. 3, Table 2, Fig. 4, Fig. 7 and Table 3 "
                         "(realistic sensing)")
-    rp.add_argument("--out", metavar="DIR", help="output folder (default out/reproduce)")
+    rp.add_argument("--out", metavar="DIR", help="output folder (default out/reproduce); a "
+                    "killed run keeps the tables' episodes there for the next call")
+    _dask(rp)
     _workers(rp)
     rp.set_defaults(func="cmd_reproduce")
 
@@ -139,8 +141,10 @@ def parser() -> argparse.ArgumentParser:
                     help=f"a run must settle within this time, {rng('--settle-limit', 'S')} "
                          "(default: the convergence suite's, 20)")
     cv.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
-    cv.add_argument("--out", metavar="DIR", help="output folder (default out/convergence)")
+    cv.add_argument("--out", metavar="DIR", help="output folder (default out/convergence); "
+                    "a killed run continues there on the next call (not with --plot)")
     cv.add_argument("--plot", action="store_true", help="write the Fig. 3 panels as PNG")
+    _dask(cv)
     _workers(cv)
     _sensing(cv)
     cv.set_defaults(func="suites.cmd_convergence")
@@ -160,7 +164,9 @@ def parser() -> argparse.ArgumentParser:
                     help=f"only tracks at least this long, {rng('--min-duration', 'S')} "
                          "(default 15)")
     pd.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides")
-    pd.add_argument("--out", metavar="DIR", help="output folder (default out/pedestrians)")
+    pd.add_argument("--out", metavar="DIR", help="output folder (default out/pedestrians); "
+                    "a killed run continues there on the next call")
+    _dask(pd)
     _workers(pd)
     _sensing(pd)
     pd.set_defaults(func="suites.cmd_pedestrians")
@@ -198,7 +204,9 @@ def parser() -> argparse.ArgumentParser:
                     "one --sensing, and write its log.csv and episode.json")
     fz.add_argument("--params", metavar="FILE", help="TOML file of parameter overrides (the "
                     "episodes draw their own formation and take --sensing's profiles)")
-    fz.add_argument("--out", metavar="DIR", help="output folder (default out/fuzz)")
+    fz.add_argument("--out", metavar="DIR", help="output folder (default out/fuzz); a killed "
+                    "run continues there on the next call")
+    _dask(fz)
     _workers(fz)
     fz.set_defaults(func="cmd_fuzz")
 

@@ -12,7 +12,6 @@ import json
 import sys
 import time
 from collections.abc import Iterable, Iterator
-from contextlib import nullcontext
 from pathlib import Path
 
 from companion import metrics
@@ -34,6 +33,8 @@ from companion.apps.logfile import LogCsv, Thinned, write_log
 from companion.apps.progress import progress_bar
 from companion.control import lookup
 from companion.evaluate import fuzz_runs
+from companion.evaluate.generators import soak_suite
+from companion.evaluate.run import finish, run_results
 from companion.io import Outputs, save_figure, write_csv, write_json
 from companion.params import Params
 from companion.sim import fuzz as sim_fuzz
@@ -156,17 +157,18 @@ def cmd_soak(args: argparse.Namespace) -> int:
     out = output_dir(Path(args.out or Path("out") / "soak"))
     print(f"soak: {duration:g} s of a random walker among pillars (seed {seed}), "
           f"controller {args.controller}; about {duration / 25:.0f} s")
-    spec = soak.soak_episode(duration, seed, args.controller, params)
-    blocks = started(stream_one(spec))
-    summary = soak.Summary(params)
+    suite = soak_suite(duration, seed, args.controller, params)
+    # with --log the episode runs here, its log going to disk as it runs; else through the
+    # engine, kept in --out once run (as evaluate keeps its episodes)
+    blocks = started(stream_one(suite.episodes[0].spec)) if args.log else None
     with Outputs(out, "soak") as stage:
-        with LogCsv(stage / "log.csv") if args.log else nullcontext() as csv:
-            for block in blocks:        # the log goes to disk as the episode runs
-                summary.add(block)
-                if csv:
-                    csv.log(block)
-        result = summary.value()
+        if blocks is not None:
+            with LogCsv(stage / "log.csv") as csv:
+                result = soak.summarize_blocks(blocks, params, csv.log)
+        else:
+            result = run_results(suite, out, 1)[0]
         write_json(stage / "soak.json", result)
+    finish(out)
     written = ["soak.json"] + ["log.csv"] * bool(args.log)
     for key, value in result.items():
         print(f"  {key:26s} {value:.4g}" if isinstance(value, float) else f"  {key:26s} {value}")
@@ -202,8 +204,9 @@ def cmd_fuzz(args: argparse.Namespace) -> int:
     print(f"fuzz: >= {steps:,} steps, seed {seed}, {', '.join(controllers)} x "
           f"{', '.join(sensings)} sensing")
     episodes = sim_fuzz.plan(steps, seed, controllers, sensings)
-    with progress_bar(len(episodes), "episode") as progress:
-        cases, counts = fuzz_runs.run(episodes, workers, progress, base, profiles)
+    with progress_bar(len(episodes), "episode") as progress:     # resumable in --out
+        cases, counts = fuzz_runs.run(episodes, workers, progress, base, profiles, out,
+                                      args.dask)
     pairs, total = fuzz_runs.by_pair(cases, counts)
     failed = fuzz_runs.failures(cases, counts)
     rates = fuzz_runs.failure_rates(cases, counts)
@@ -216,6 +219,7 @@ def cmd_fuzz(args: argparse.Namespace) -> int:
     with Outputs(out, "fuzz") as stage:
         write_json(stage / "fuzz.json", report)
         write_csv(stage / "fuzz.csv", fuzz_runs.COLUMNS, fuzz_runs.csv_rows(cases, counts))
+    finish(out)
     print(fuzz_runs.table(pairs, total))
     for f in failed[:20]:
         print(f"FAIL seed {f['seed']} {f['controller']}/{f['sensing']}: replay with companion "
@@ -238,7 +242,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
           f"into {out}")
     with progress_bar(reproduce.episode_count(), "episode") as progress, \
             Outputs(out, "reproduce") as stage:
-        result = reproduce.reproduce(stage, workers, progress)
+        result = reproduce.reproduce(stage, workers, progress, keep=out, dask=args.dask)
+    finish(out)
     print(reproduce.fig3_summary(result.fig3))
     print("Table 2 (ours; paper's LQR/PID/VSM/IC rho and alpha at the right):")
     print(reproduce.table2_text(result.table2))

@@ -2,8 +2,9 @@
 fig4.gif), Fig. 7 and Table 3 (with realistic sensing, :mod:`companion.apps.table3`), side by
 side.
 
-Every number comes from a simulation run here; the paper's published Table 2 is kept beside
-ours for comparison (:data:`PAPER_TABLE2`, in the paper's units).
+Every number comes from a simulation run here, as two suites of the evaluate engine
+(:func:`runs`); the paper's published Table 2 is kept beside ours for comparison
+(:data:`PAPER_TABLE2`, in the paper's units).
 """
 
 from __future__ import annotations
@@ -16,8 +17,9 @@ from pathlib import Path
 from companion import metrics
 from companion.apps import animate, plots, table3
 from companion.control import CONTROLLERS
+from companion.evaluate.generators import scenario_episodes, suite_of
 from companion.evaluate.rows import row_and_log
-from companion.evaluate.run import run_episodes, suite_rows
+from companion.evaluate.run import run_results, suite_rows
 from companion.evaluate.suite import Suite, load_suite
 from companion.io import save_figure, write_csv, write_text
 from companion.sim import convergence
@@ -123,38 +125,52 @@ def suites() -> dict[str, Suite]:
     return {name: load_suite(name) for name in ("convergence", "table2", "table3")}
 
 
+def runs(shipped: dict[str, Suite] | None = None) -> tuple[Suite, Suite]:
+    """What :func:`reproduce` runs, as two suites: the tables' (Table 2 and Table 3, their
+    rows) and the figures' (Fig. 3's suite, Fig. 4 with every controller, Fig. 7 with lqr,
+    as ``companion run`` runs them; their rows and logs). ``shipped``: :func:`suites`."""
+    shipped = shipped or suites()
+    tables = suite_of("reproduce-tables", (*shipped["table2"].episodes,
+                                           *shipped["table3"].episodes),
+                      parts=(shipped["table2"].digest, shipped["table3"].digest))
+    figures = suite_of("reproduce-figures", (*shipped["convergence"].episodes,
+                                             *scenario_episodes("fig4", controllers()),
+                                             *scenario_episodes("fig7", ["lqr"])), row_and_log)
+    return tables, figures
+
+
 def episode_count() -> int:
     """Episodes :func:`reproduce` runs: Fig. 3, Table 2, Fig. 4, Fig. 7 and Table 3."""
-    return sum(len(s.episodes) for s in suites().values()) + len(controllers()) + 1
+    return sum(len(s.episodes) for s in runs())
 
 
-def reproduce(out: Path, workers: int | None = None, progress: Progress | None = None
-              ) -> Reproduction:
-    """Run Fig. 3, Table 2 and Table 3 (their shipped suites), Fig. 4 and Fig. 7 (every
-    episode through the runner, in ``workers`` processes) and write their files into
-    ``out``."""
-    names = controllers()
-    runs = suites()
-    fig4, fig7 = load_scenario("fig4"), load_scenario("fig7")
-    fig3 = runs["convergence"].episodes
-    logged = [e.spec for e in fig3] + [fig4.episode(c) for c in names] + [fig7.episode("lqr")]
-    tables = runs["table2"].episodes + runs["table3"].episodes
-    results = run_episodes(logged, workers, reduce=row_and_log, progress=progress)
-    plain = run_episodes([e.spec for e in tables], workers, progress=progress and (
-        lambda n: progress(len(logged) + n)))
+def reproduce(out: Path, workers: int | None = None, progress: Progress | None = None,
+              keep: Path | None = None, dask: str | None = None) -> Reproduction:
+    """Run the suites of :func:`runs` through the engine (``workers`` processes or ``dask``,
+    :func:`~companion.evaluate.run.run_results`; the tables' episodes kept in ``keep`` as
+    they finish, the figures' logs in memory) and write their files into ``out``."""
+    shipped = suites()
+    tables, figures = runs(shipped)
+    done = dict(zip((e.key for e in tables.episodes),
+                    run_results(tables, keep, workers, dask, progress and (
+                        lambda n, total: progress(n)))))
+    results = run_results(figures, None, workers, dask, progress and (
+        lambda n, total: progress(len(tables.episodes) + n)))
     fig3_runs: dict[float, list] = {}
     fig3_rows = []
-    for e, (row, log) in zip(fig3, results):
+    logs: dict[str, dict] = {}                       # by scenario, the logs per controller
+    for e, (row, log) in zip(figures.episodes, results):
+        if e.group in ("fig4", "fig7"):
+            logs.setdefault(e.group, {})[e.controller] = log
+            continue
         case = convergence.Case(e.spec.person.state(0.0).v, e.spec.start, e.side)
         fig3_runs.setdefault(case.speed, []).append((case.label, case.side, log))
         fig3_rows.append(convergence.csv_row(case, _metrics(row)))
-    fig4_runs = {ctl: log for ctl, (_, log) in zip(names, results[len(fig3):])}
-    fig7_log = results[-1][1]
-    done = {e.key: r for e, r in zip(tables, plain)}
+    fig4_runs = logs["fig4"]
     trajectory = {v: k for k, v in TRAJECTORIES.items()}
     rows = [Table2Row(trajectory[r["motion"]], r["controller"], r)
-            for r in suite_rows(runs["table2"], done)]
-    table3_rows = table3.rows(suite_rows(runs["table3"], done))
+            for r in suite_rows(shipped["table2"], done)]
+    table3_rows = table3.rows(suite_rows(shipped["table3"], done))
     write_csv(out / "fig3.csv", convergence.CSV_COLUMNS, fig3_rows)
     for speed, speed_runs in fig3_runs.items():
         _save(plots.convergence(speed_runs, f"Fig. 3: person at {speed:g} m/s (lqr)"),
@@ -165,9 +181,9 @@ def reproduce(out: Path, workers: int | None = None, progress: Progress | None =
     fig4_table = fig4_rows(fig4_runs)
     write_csv(out / "fig4.csv", FIG4_COLUMNS, fig4_table)
     _scenario_figures(out, "fig4", fig4_runs)
-    animate.save(out / "fig4.gif", fig4_runs, fig4, "Fig. 4: figure-8 with an obstacle, "
-                 "every controller")
-    _scenario_figures(out, "fig7", {"lqr": fig7_log})
+    animate.save(out / "fig4.gif", fig4_runs, load_scenario("fig4"), "Fig. 4: figure-8 with an "
+                 "obstacle, every controller")
+    _scenario_figures(out, "fig7", logs["fig7"])
     write_csv(out / "table3.csv", table3.COLUMNS, table3_rows)
     write_text(out / "table3.md", table3.markdown(table3_rows))
     return Reproduction(rows, fig3_rows, fig4_table, table3_rows)

@@ -6,6 +6,7 @@ their own table."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
 from companion.apps import plots
@@ -25,7 +26,7 @@ from companion.control import CONTROLLERS
 from companion.data import pedestrians
 from companion.evaluate import walkers
 from companion.evaluate.rows import row_and_log
-from companion.evaluate.run import run_episodes, suite_rows
+from companion.evaluate.run import run_results, suite_rows
 from companion.evaluate.suite import suite_from_mapping, suite_path
 from companion.io import save_figure
 
@@ -66,7 +67,7 @@ def cmd_pedestrians(args: argparse.Namespace) -> int:
                 motions=motions)
     out = output_dir(Path(args.out or Path("out") / "pedestrians"))
     suite = suite_from_mapping(data, Path("<companion pedestrians>"))
-    rows = evaluate(suite, out, workers)
+    rows = evaluate(suite, out, workers, args.dask)
     print(walkers_text(walkers.table(rows), walkers.paired(rows, controllers[0])))
     print(f"wrote episodes.csv, summary.json, summary.md and the figures in {out}\n")
     print(pedestrians.CREDIT)
@@ -113,9 +114,9 @@ def cmd_convergence(args: argparse.Namespace) -> int:
     workers = workers_arg(args)
     out = output_dir(Path(args.out or Path("out") / "convergence"))
     suite = suite_from_mapping(data, Path("<companion convergence>"))
-    if args.plot:       # the figures need the logs: run here, write through evaluate
-        specs = [e.spec for e in suite.episodes]
-        results = run_episodes(specs, workers, reduce=row_and_log)
+    if args.plot:       # the figures need the logs: the engine returns them, keeps nothing
+        results = run_results(dataclasses.replace(suite, row=row_and_log), None, workers,
+                              args.dask)
         rows = suite_rows(suite, {e.key: r for e, (r, _) in zip(suite.episodes, results)})
         logs = [log for _, log in results]
 
@@ -129,9 +130,9 @@ def cmd_convergence(args: argparse.Namespace) -> int:
                                                     f"{args.controller}")
                 save_figure(fig, folder / f"{group}.png")
                 plots.close(fig)
-        rows = evaluate(suite, out, workers, rows=rows, extra=figures)
+        rows = evaluate(suite, out, workers, args.dask, rows=rows, extra=figures)
     else:
-        rows = evaluate(suite, out, workers)
+        rows = evaluate(suite, out, workers, args.dask)
     failed = dict(failures(suite, rows))
     print(f"{'start':>24} {'side':>5} {'settle_s':>9} {'min_dist_m':>10}")
     for r in rows:

@@ -1,34 +1,59 @@
 """The closed-loop fuzz over many episodes (:mod:`companion.sim.fuzz` draws and counts one):
-running a plan of episodes, replaying one, and the totals, failure rates, CSV rows and
-table that ``companion fuzz`` writes and prints (docs/safety.md)."""
+a plan of episodes as a suite whose results are their counts (:func:`fuzz_suite`, run by
+the engine of :mod:`companion.evaluate.run`), replaying one, and the totals, failure rates,
+CSV rows and table that ``companion fuzz`` writes and prints (docs/safety.md)."""
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from functools import partial
+from pathlib import Path
 
 from companion import metrics
+from companion.evaluate.generators import suite_of
+from companion.evaluate.run import run_results
+from companion.evaluate.suite import Episode, Suite
 from companion.params import PROFILES, Params, SensingParams
 from companion.sim import fuzz
-from companion.sim.runner import WithSpec, run_many, run_one
+from companion.sim.runner import EpisodeSpec, run_one
 from companion.types import Log
 
 COLUMNS = (*(f.name for f in dataclasses.fields(fuzz.Case)), *fuzz.COUNTS, "failed")
 
 
-def run(episodes: Sequence[tuple[int, str, str]], workers: int | None,
-        progress: Callable[[int], None] | None = None, base: Params | None = None,
-        profiles: Mapping[str, SensingParams] = PROFILES
-        ) -> tuple[list[fuzz.Case], list[dict]]:
-    """Draw and run the ``episodes`` of :func:`plan` (on the parameters ``base``, default
-    Table 1's, and the sensing ``profiles`` by name); their cases and counts, in order."""
+def fuzz_suite(episodes: Sequence[tuple[int, str, str]], base: Params | None = None,
+               profiles: Mapping[str, SensingParams] = PROFILES
+               ) -> tuple[Suite, list[fuzz.Case]]:
+    """The ``episodes`` of :func:`~companion.sim.fuzz.plan` drawn (on the parameters
+    ``base``, default Table 1's, and the sensing ``profiles`` by name) as a suite whose
+    results are their counts (:func:`counts`; motion ``fuzz``, side ``drawn``, the episode's
+    seed as its seed), and their cases, in order."""
     base = base or Params()
     drawn = [fuzz.draw(*episode, base=base, profiles=profiles) for episode in episodes]
-    counts = run_many([spec for _, spec in drawn], workers,
-                      summarize=WithSpec(partial(fuzz.spec_counts, params=base)),
-                      progress=progress)
-    return [case for case, _ in drawn], counts
+    suite = suite_of("fuzz", (Episode("fuzz", "fuzz", "drawn", c.sensing, c.controller, c.seed,
+                                      spec) for c, spec in drawn),
+                     partial(counts, params=base), parts=(base, dict(profiles)))
+    return suite, [case for case, _ in drawn]
+
+
+def counts(spec: EpisodeSpec, params: Params) -> dict:
+    """Run one fuzz episode: its counts (:func:`companion.sim.fuzz.spec_counts`, the
+    thresholds of ``params``)."""
+    return fuzz.spec_counts(run_one(spec), spec, params)
+
+
+def run(episodes: Sequence[tuple[int, str, str]], workers: int | None,
+        progress: Callable[[int], None] | None = None, base: Params | None = None,
+        profiles: Mapping[str, SensingParams] = PROFILES, out: Path | None = None,
+        dask: str | None = None) -> tuple[list[fuzz.Case], list[dict]]:
+    """Run :func:`fuzz_suite` (``workers``, ``dask``: the backends of
+    :func:`~companion.evaluate.run.run_results`; with ``out``, each episode's counts are kept
+    there and a killed run resumes); its cases and counts, in order. ``progress(done)``."""
+    suite, cases = fuzz_suite(episodes, base, profiles)
+    results = run_results(suite, out, workers, dask,
+                          progress and (lambda done, total: progress(done)))
+    return cases, results
 
 
 def replay(seed: int, controller: str, sensing: str, base: Params | None = None,

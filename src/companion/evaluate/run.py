@@ -1,10 +1,14 @@
 """Running a suite: every episode once, on local worker processes or a Dask cluster, each
-result kept as soon as it is known so that a killed run resumes where it stopped.
+result kept as soon as it is known so that a killed run resumes where it stopped. An
+episode's result is what the suite's row function makes of it (:attr:`Suite.row
+<companion.evaluate.suite.Suite>`: the row of numbers of a TOML suite, or what a suite
+generator asks for, such as the fuzz's counts).
 
 Results are kept in ``<out>/.evaluate.partial/episodes.jsonl``, one JSON line per finished
 episode, appended and flushed to disk one at a time (a line cut short by a kill is ignored).
-The file's first line holds the suite's digest and the code's (every source file of companion,
-and the numpy and scipy versions); a changed suite or an updated companion starts over. An episode's
+The file's first line holds the suite's digest, its row function's name and the code's
+digest (every source file of companion, and the numpy and scipy versions); a changed suite
+or an updated companion starts over. An episode's
 result depends on its spec alone, so the same suite gives the same results whatever the
 number or kind of workers (given the same companion and libraries on every worker).
 """
@@ -16,43 +20,65 @@ import hashlib
 import json
 import os
 from collections.abc import Callable, Iterator, Sequence
+from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import scipy
 
-from companion.evaluate.rows import summary_row
 from companion.evaluate.suite import Suite
 from companion.sim.runner import EpisodeSpec, run_unordered
 
 PARTIAL = ".evaluate.partial"
 
 
-def run_suite(suite: Suite, out: Path, workers: int | None = None, dask: str | None = None,
-              progress: Callable[[int, int], None] | None = None) -> list[dict]:
+def run_suite(suite: Suite, out: Path | None, workers: int | None = None,
+              dask: str | None = None, progress: Callable[[int, int], None] | None = None
+              ) -> list[dict]:
     """One row per episode of ``suite`` (its factors, ``episode``, ``pair`` and its
     numbers), in the suite's order; the episodes kept under ``out`` from an earlier call are
-    not run again. ``dask``: None (local worker processes), ``"local"`` (a Dask LocalCluster
-    on 127.0.0.1) or a scheduler address. ``progress(done, total)`` after each episode."""
+    not run again (None: nothing kept). ``dask``: None (local worker processes), ``"local"``
+    (a Dask LocalCluster on 127.0.0.1) or a scheduler address. ``progress(done, total)``
+    after each episode."""
+    return suite_rows(suite, dict(zip((e.key for e in suite.episodes),
+                                      run_results(suite, out, workers, dask, progress))))
+
+
+def run_results(suite: Suite, out: Path | None = None, workers: int | None = None,
+                dask: str | None = None, progress: Callable[[int, int], None] | None = None
+                ) -> list:
+    """What ``suite.row`` gives for every episode of ``suite``, in the suite's order, on the
+    backends of :func:`run_suite`. With ``out`` each result is kept there as soon as it is
+    known (it must then be JSON: a row, counts) and the results kept from an earlier call of
+    the same suite, row function and companion are not run again; without, nothing is kept
+    (a result may then be anything picklable: a row and its log)."""
     if dask is not None:
         from companion.evaluate.dask_backend import check_address
         check_address(dask)
-    store = Path(out) / PARTIAL / "episodes.jsonl"
-    digest = f"{suite.digest}:{code_digest()}"
-    kept, done = _load(store, digest)
+    store = None if out is None else Path(out) / PARTIAL / "episodes.jsonl"
+    digest = f"{suite.digest}:{_name(suite.row)}:{code_digest()}"
+    kept, done = (False, {}) if store is None else _load(store, digest)
     todo = [e for e in suite.episodes if e.key not in done]
     total = len(suite.episodes)
     if progress:
         progress(total - len(todo), total)
-    with _Appender(store, digest, fresh=not kept) as keep:
+    with nullcontext(lambda key, result: None) if store is None \
+            else _Appender(store, digest, fresh=not kept) as keep:
         for n, (i, result) in enumerate(_backend(dask, workers, [e.spec for e in todo],
-                                                 summary_row), 1):
+                                                 suite.row), 1):
             done[todo[i].key] = result
             keep(todo[i].key, result)
             if progress:
                 progress(total - len(todo) + n, total)
-    return suite_rows(suite, done)
+    return [done[e.key] for e in suite.episodes]
+
+
+def _name(func: Callable) -> str:
+    """The module and name of a row function (of the function a partial wraps): what it
+    computes is its code's, and a partial's arguments are the suite digest's."""
+    func = getattr(func, "func", func)
+    return f"{func.__module__}.{func.__qualname__}"
 
 
 @functools.cache
@@ -68,9 +94,9 @@ def code_digest() -> str:
 
 def run_all(suite: Suite, workers: int | None = None, dask: str | None = None,
             progress: Callable[[int], None] | None = None) -> list[dict]:
-    """The rows of :func:`run_suite` without keeping anything on disk (benches, tests)."""
-    results = run_episodes([e.spec for e in suite.episodes], workers, dask, progress=progress)
-    return suite_rows(suite, {e.key: r for e, r in zip(suite.episodes, results)})
+    """The rows of :func:`run_suite` without keeping anything on disk (benches, tests);
+    ``progress(done)``."""
+    return run_suite(suite, None, workers, dask, progress and (lambda done, total: progress(done)))
 
 
 def suite_rows(suite: Suite, results: dict[str, dict]) -> list[dict]:
@@ -78,20 +104,6 @@ def suite_rows(suite: Suite, results: dict[str, dict]) -> list[dict]:
     (``results`` by episode key)."""
     return [{**e.factors, "episode": e.key, "pair": e.pair, **results[e.key]}
             for e in suite.episodes]
-
-
-def run_episodes(specs: Sequence[EpisodeSpec], workers: int | None = None,
-                 dask: str | None = None, reduce: Callable[[EpisodeSpec], Any] = summary_row,
-                 progress: Callable[[int], None] | None = None) -> list:
-    """``reduce(spec)`` (a picklable function: by default the episode's row, or
-    :func:`~companion.evaluate.rows.row_and_log`) of every spec, in order, on the backend of
-    :func:`run_suite`; ``progress(done)`` after each episode."""
-    out: list = [None] * len(specs)
-    for n, (i, result) in enumerate(_backend(dask, workers, specs, reduce), 1):
-        out[i] = result
-        if progress:
-            progress(n)
-    return out
 
 
 def finish(out: Path) -> None:

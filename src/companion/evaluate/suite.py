@@ -24,7 +24,7 @@ from companion.config import MAX_DURATION, build, load_toml, reject_unknown
 from companion.control import CONTROLLERS, make_controller
 from companion.errors import ConfigError
 from companion.evaluate.motions import fixed_sides, motions
-from companion.evaluate.rows import Criterion, criteria_from
+from companion.evaluate.rows import Criterion, criteria_from, summary_row
 from companion.params import (
     SIDES,
     Formation,
@@ -79,9 +79,13 @@ class Episode:
 
 @dataclass(frozen=True)
 class Suite:
-    """A parsed suite file: its name, reference controller, episodes and a digest of every
-    file it read, scenarios and tracks included (a changed file invalidates kept results, as
-    does a changed companion: :func:`companion.evaluate.run.code_digest`)."""
+    """A parsed suite file (or a suite generator's suite,
+    :mod:`companion.evaluate.generators`): its name, reference controller, episodes and a
+    digest of every file it read, scenarios and tracks included (a changed file invalidates
+    kept results, as does a changed companion: :func:`companion.evaluate.run.code_digest`).
+    ``row``: what an episode gives, a module-level function of its spec (or a partial of
+    one, its arguments part of the digest) run in the worker; by default its row of
+    numbers."""
 
     name: str
     description: str
@@ -89,6 +93,7 @@ class Suite:
     episodes: tuple[Episode, ...]
     digest: str
     criteria: tuple[Criterion, ...] = ()
+    row: Callable[[EpisodeSpec], Any] = summary_row
 
 
 def builtin_suites() -> list[str]:

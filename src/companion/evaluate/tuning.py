@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from companion.errors import ConfigError
-from companion.evaluate.run import run_episodes
+from companion.evaluate.run import run_results
 from companion.evaluate.suite import Suite
 from companion.params import Params
 
@@ -171,10 +171,10 @@ def tune_on_suite(suite: Suite, controller: str, trials: int, storage: Any = Non
     optuna = _optuna()
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     dims = tuple(dims or SPACES[controller])
-    specs = [e.spec for e in suite.episodes if e.controller == controller]
-    if not specs:
+    episodes = [e for e in suite.episodes if e.controller == controller]
+    if not episodes:
         raise ValueError(f"the suite has no episodes of {controller!r}")
-    base = specs[0].params
+    base = episodes[0].spec.params
     space = "-".join(dict.fromkeys(d.section for d in dims))
     name = study_name or f"companion-{controller}-{space}-{suite.digest[:16]}"  # per suite
     url = storage
@@ -193,11 +193,13 @@ def tune_on_suite(suite: Suite, controller: str, trials: int, storage: Any = Non
         values = [trial.suggest_float(d.name, d.low, d.high, log=True) for d in dims]
         cache: dict[int, Params] = {}
         candidates = []
-        for spec in specs:
-            if id(spec.params) not in cache:
-                cache[id(spec.params)] = apply(spec.params, dims, values)
-            candidates.append(dataclasses.replace(spec, params=cache[id(spec.params)]))
-        value = objective(run_episodes(candidates, workers, dask))
+        for e in episodes:
+            if id(e.spec.params) not in cache:
+                cache[id(e.spec.params)] = apply(e.spec.params, dims, values)
+            candidates.append(dataclasses.replace(e, spec=dataclasses.replace(
+                e.spec, params=cache[id(e.spec.params)])))
+        trial_suite = dataclasses.replace(suite, episodes=tuple(candidates))
+        value = objective(run_results(trial_suite, None, workers, dask))
         if progress:
             progress(trial.number, value)
         return value

@@ -270,8 +270,8 @@ def episode_counts(log: Log, params: Params, obstacles: Sequence[Obstacle] = ())
 
 
 def spec_counts(log: Log, spec: EpisodeSpec, params: Params) -> dict:
-    """:func:`episode_counts` of an episode with its obstacles (for
-    :class:`~companion.sim.runner.WithSpec`); ``params`` gives the thresholds."""
+    """:func:`episode_counts` of an episode with its obstacles (the fuzz's row function,
+    :func:`companion.evaluate.fuzz_runs.counts`); ``params`` gives the thresholds."""
     return episode_counts(log, params, spec.obstacles)
 
 

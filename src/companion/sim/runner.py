@@ -21,7 +21,7 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Any, NamedTuple
+from typing import Any
 
 from companion import _jit
 from companion.control import make_controller
@@ -81,22 +81,13 @@ def warm_up() -> None:
     _jit.warm_up()
 
 
-class WithSpec(NamedTuple):
-    """A ``summarize`` for :func:`run_many` that also needs the episode: ``func(log, spec)``
-    (a module-level function or a partial of one, so that it reaches the workers)."""
-
-    func: Callable[[Log, EpisodeSpec], Any]
-
-
-def _run(spec: EpisodeSpec, summarize: Callable[[Log], Any] | WithSpec | None) -> Any:
+def _run(spec: EpisodeSpec, summarize: Callable[[Log], Any] | None) -> Any:
     log = run_one(spec)
-    if isinstance(summarize, WithSpec):
-        return summarize.func(log, spec)
     return log if summarize is None else summarize(log)
 
 
 def run_many(specs: Sequence[EpisodeSpec], workers: int | None = None,
-             summarize: Callable[[Log], Any] | WithSpec | None = None,
+             summarize: Callable[[Log], Any] | None = None,
              progress: Callable[[int], None] | None = None) -> list:
     """The log of every episode of ``specs`` (or ``summarize(log)``), in order.
 
@@ -105,9 +96,9 @@ def run_many(specs: Sequence[EpisodeSpec], workers: int | None = None,
     specs : sequence of EpisodeSpec
     workers : int, optional
         Worker processes (default: one per CPU); 1 runs everything in this process.
-    summarize : callable or WithSpec, optional
+    summarize : callable, optional
         A module-level function applied to each log in the worker (keeps only what is needed,
-        e.g. :func:`companion.metrics.compute`), or one of the log and the spec.
+        e.g. :func:`companion.metrics.compute`).
     progress : callable, optional
         Called with the number of episodes finished so far.
 

@@ -12,6 +12,7 @@ with the person and the obstacles, non-finite values and its statuses.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,7 +21,7 @@ from companion.geometry import obstacle_arrays, path_clearance
 from companion.metrics import Entries, Running
 from companion.params import Params
 from companion.sim.person import Move, Row, ScriptedWalk, integrate_move
-from companion.sim.runner import EpisodeSpec, run_one
+from companion.sim.runner import EpisodeSpec, run_one, stream_one
 from companion.types import Circle, Log, Obstacle, Wall
 
 #: Half the side of the square arena (m), centred on the origin.
@@ -190,9 +191,24 @@ class Summary:
 
 def summarize(log: Log, params: Params) -> dict:
     """Collisions, closest approaches, finiteness and time shares per status."""
+    return summarize_blocks([log], params)
+
+
+def summarize_blocks(blocks: Iterable[Log], params: Params,
+                     each: Callable[[Log], None] | None = None) -> dict:
+    """:func:`summarize` over an episode's consecutive log blocks, as they come;
+    ``each(block)`` too (to write the log as the episode runs)."""
     summary = Summary(params)
-    summary.add(log)
+    for block in blocks:
+        summary.add(block)
+        if each is not None:
+            each(block)
     return summary.value()
+
+
+def spec_summary(spec: EpisodeSpec) -> dict:
+    """Run the soak episode ``spec`` and summarise it block by block (bounded memory)."""
+    return summarize_blocks(stream_one(spec), spec.params)
 
 
 def soak_episode(duration: float, seed: int = 0, controller: str = "lqr",
