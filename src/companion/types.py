@@ -10,6 +10,7 @@ import dataclasses
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -192,8 +193,7 @@ class Command:
     status: str = "ok"
 
 
-@dataclass(frozen=True)
-class StepReport:
+class StepReport(NamedTuple):
     """What the standard stack did in one step, beside the :class:`Command` it sent: the
     ``status`` and ``reason`` (the reasons joined by "+", the stop first; empty when ok),
     each ``(stage, reason)`` in the order the pipeline's stages raised them, the person
@@ -201,7 +201,7 @@ class StepReport:
     ``(v, omega)`` within the rate limits before the keep-out changed it (None without a
     controller step), the formation's ``bearing`` in force (rad) and the ``obstacles`` the
     stack knew (world frame). Logs, bags, the node's status topic and the simulator's
-    recorder read it."""
+    recorder read it. A named tuple: the stack makes one every step."""
 
     status: str = "ok"
     reason: str = ""

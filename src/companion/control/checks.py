@@ -14,7 +14,11 @@ from companion.types import Circle, Obstacle, Pose, Scan
 
 
 def finite(*values: float) -> bool:
-    return all(math.isfinite(x) for x in values)
+    """Every value finite (a plain loop: called many times a step)."""
+    for x in values:
+        if not math.isfinite(x):
+            return False
+    return True
 
 
 #: Largest plausible robot coordinate (m): beyond it a pose is corrupt, and the geometry of

@@ -114,9 +114,11 @@ class Tracking:
             self.delays.detections(obs.detections, obs.t)
             s.restart |= self.tracker.reacquired
         s.estimate = self.tracker.estimate(s.now, reasons)
-        known = tuple(ob for ob in obs.obstacles if checks.obstacle_is_finite(ob))
-        if len(known) < len(obs.obstacles):
-            reasons.append("obstacle_invalid")
+        known = obs.obstacles
+        if known:
+            known = tuple(ob for ob in known if checks.obstacle_is_finite(ob))
+            if len(known) < len(obs.obstacles):
+                reasons.append("obstacle_invalid")
         s.obstacles = self.front.obstacles(known, obs.scan, s.estimate, s.now)
         return reasons
 

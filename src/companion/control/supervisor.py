@@ -78,14 +78,16 @@ class SafetySupervisor:
         s = Step(obs, self._choice.in_force, self._limits.prev)
         raised: list[tuple[str, str]] = []
         for name, stage in self._inputs:
-            for r in stage(s):
-                raised.append((name, r))
+            reasons = stage(s)
+            if reasons:
+                raised += [(name, r) for r in reasons]
         if s.measured and not self._limits.started:   # limits start from the measured velocity
             self._limits.start(*s.velocity)
             s.prev = self._limits.prev
         for name, stage in self._actions:
-            for r in stage(s):
-                raised.append((name, r))
+            reasons = stage(s)
+            if reasons:
+                raised += [(name, r) for r in reasons]
         final = self._limits(s)
         if s.fresh:
             self.delays.sent(obs.t, self._limits.prev)

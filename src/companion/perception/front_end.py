@@ -111,13 +111,16 @@ class OdometrySource(Source):
         self.samples: deque[OdometrySample] = deque()
 
     def add(self, t: float, pose: Pose, velocity: tuple[float, float] | None) -> None:
-        finite = math.isfinite(pose.x) and math.isfinite(pose.y) and math.isfinite(pose.theta)
-        if finite and self.take(t):
+        samples = self.samples
+        if t > self.stamp and math.isfinite(pose.x) and math.isfinite(pose.y) \
+                and math.isfinite(pose.theta):
+            self.stamp = t
             v = velocity if velocity is not None and math.isfinite(velocity[0]) \
                 and math.isfinite(velocity[1]) else (0.0, 0.0)
-            self.samples.append(OdometrySample(t, pose, v))
-        while self.samples and self.samples[0].t < t - self.horizon_s:
-            self.samples.popleft()
+            samples.append(OdometrySample(t, pose, v))
+        oldest = t - self.horizon_s
+        while samples and samples[0].t < oldest:
+            samples.popleft()
 
     def pose_at(self, t: float) -> Pose:
         """The robot pose at ``t`` (NaN without a valid one: what is placed by it is

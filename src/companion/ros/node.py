@@ -71,8 +71,8 @@ class View(NamedTuple):
 
 def with_reasons(report: StepReport, reasons: list[str]) -> StepReport:
     """``report`` with the node's own ``reasons`` added (degraded if it was ok)."""
-    return dataclasses.replace(
-        report, status="degraded" if report.status == "ok" else report.status,
+    return report._replace(
+        status="degraded" if report.status == "ok" else report.status,
         reason="+".join([report.reason] * bool(report.reason) + reasons),
         stages=(*report.stages, *(("node", r) for r in reasons)))
 

@@ -112,8 +112,8 @@ class Recorder:
         if sample.came == "new":
             self.last = report or StepReport(sample.command.status)
         elif sample.came == "timeout":
-            self.last = dataclasses.replace(self.last, status="stopped",
-                                            reason="command_timeout", requested=None)
+            self.last = self.last._replace(status="stopped", reason="command_timeout",
+                                           requested=None)
         n = len(self.status)
         if self.walkers is not None:
             self.walkers[n] = sample.walkers_xy
