@@ -68,11 +68,7 @@ def test_worker_processes_die_with_a_killed_evaluate(tmp_path):
             time.sleep(0.1)
         assert not [pid for pid, start in workers.items() if _alive(pid, start)]
     finally:
-        proc.kill()
-        proc.wait(timeout=10)
-        for pid, start in workers.items():
-            if _alive(pid, start):
-                os.kill(pid, signal.SIGKILL)
+        _reap(proc, workers)
 
 
 _ORPHAN = """
@@ -107,8 +103,14 @@ def test_without_prctl_a_worker_still_dies_with_its_parent():
             time.sleep(0.05)
         assert not _alive(pid, child[pid])
     finally:
-        proc.kill()
-        proc.wait(timeout=10)
-        for pid, start in child.items():
-            if _alive(pid, start):
-                os.kill(pid, signal.SIGKILL)
+        _reap(proc, child)
+
+
+def _reap(proc: subprocess.Popen, children: dict[int, float]) -> None:
+    """Stop the test's process and any child of it still alive (the test cleans up after
+    itself whether it passed or not)."""
+    proc.kill()
+    proc.wait(timeout=10)
+    for pid, start in children.items():
+        if _alive(pid, start):
+            os.kill(pid, signal.SIGKILL)
