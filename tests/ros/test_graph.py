@@ -107,7 +107,7 @@ def test_the_node_logs_start_warnings_and_status_changes_to_rosout():
     logs = sent(bus, ts, "/rosout")
     assert [m.msg for m in logs][:2] == ["hello", "status stopped: odometry_stale"]
     assert logs[1].level == 30 and logs[0].stamp.sec > 0
-    assert logs[1].function == "_watch" and logs[1].file.endswith("node.py")
+    assert logs[1].function == "status" and logs[1].file.endswith("watch.py")
     rosout = next(e for o, e in bus.endpoints if e.topic == "/rosout")
     assert rosout.qos.transient_local and rosout.qos.depth == 1000
     assert message(ts, "rcl_interfaces/msg/Log").__msgtype__ == logs[0].__msgtype__

@@ -38,6 +38,7 @@ from companion.ros.rosout import RosoutHandler, logger_name
 from companion.ros.settings import NodeConfig
 from companion.ros.tf import TransformBuffer, from_message
 from companion.ros.transport import DEFAULT, PARAMETER_EVENTS, ROSOUT, Qos, Transport
+from companion.ros.watch import Watch
 from companion.types import (
     Circle,
     Command,
@@ -50,13 +51,6 @@ from companion.types import (
 )
 
 _NOWHERE = Pose(math.nan, math.nan, math.nan)
-#: How often (s of node time) the node looks at the publishers on its input topics.
-GRAPH_PERIOD_S = 1.0
-#: A change between ok and degraded is logged at most this often (s); a stop, and the end of
-#: one, at once.
-STATUS_LOG_S = 5.0
-
-
 class View(NamedTuple):
     """What the node shows of one tick (markers, the recorded scene): the time (s), the
     robot pose it used, the person estimate, the desired slot and the obstacles it knows with
@@ -104,15 +98,11 @@ class CompanionNode:
         self.view: View | None = None
         self.tf = TransformBuffer() if r.use_tf else None
         self.placer = Placer(r, self.tf)
-        self.warnings: list[str] = []                        # active problems, one line each
-        self._placing: dict[str, str] = {}                   # inputs that cannot be placed
-        self._said: set[str] = set()
-        self._graph_t = -math.inf
         self._announced = False                              # the parameters, at the 1st tick
-        self._shown = ("", "", -math.inf)                    # status, reason, when logged
         self.name = "/".join([r.namespace.rstrip("/"), r.node_name])
         self.log = logging.getLogger(f"companion.node.{logger_name(r.node_name, r.namespace)}")
         self.log.setLevel(logging.INFO)                      # as a ROS 2 node logs by default
+        self.watch = Watch(self.log)                         # what the node logs of itself
         self._subscribe()
         self._advertise()
 
@@ -294,7 +284,8 @@ class CompanionNode:
         if self.view is not None and self.last is cmd and not self._announced:
             self._announced = True
             self.parameters.announce()
-        self._watch(now, report)
+        self.watch.status(now, report)
+        self.watch.problems(now, self._graph_problems)
         return cmd
 
     def stop(self, now: float) -> None:
@@ -363,7 +354,7 @@ class CompanionNode:
             if key != "odom" else frame
         if key == "scan":
             line += " (or set ros.lidar_frame and ros.lidar_mount)"
-        self._placing[key] = f"{getattr(r.topics, key)}: {line}"
+        self.watch.placing[key] = f"{getattr(r.topics, key)}: {line}"
 
     def _publish(self, now: float, robot: Pose, cmd: Command, report: StepReport) -> None:
         p, r = self.config.params, self.config.ros
@@ -378,33 +369,12 @@ class CompanionNode:
             slot = slot_point(w, p)
         meter = self.stack.delays
         self._status(convert.status_msg(now, cmd, report, errors, r.node_name, tb,
-                                        self.warnings, (meter.latency, meter.tau)))
+                                        self.watch.warnings, (meter.latency, meter.tau)))
         reach = tuple((ob, influence_range(ob, p.avoidance)) for ob in report.obstacles
                       if isinstance(ob, Circle))
         self.view = View(now, robot, e, slot, reach)
         if self._markers is not None:
             self._markers(convert.markers_msg(now, r.odom_frame, e, slot, reach, tb))
-
-    def _watch(self, now: float, report: StepReport) -> None:
-        """The log of what changed: status changes, and each new problem on the graph or
-        with placing inputs (checked every :data:`GRAPH_PERIOD_S`)."""
-        status, reason, shown = self._shown
-        stop = "stopped" in (report.status, status)
-        if report.status != status and (stop or now - shown >= STATUS_LOG_S):
-            level = logging.WARNING if report.status == "stopped" else logging.INFO
-            self.log.log(level, "status %s%s", report.status,
-                         f": {report.reason}" * bool(report.reason))
-            self._shown = (report.status, report.reason, now)
-        if now - self._graph_t < GRAPH_PERIOD_S:
-            return
-        self._graph_t = now
-        lines = self._graph_problems() + list(self._placing.values())
-        self._placing = {}
-        for line in lines:
-            if line not in self._said:
-                self.log.warning("%s", line)
-                self._said.add(line)
-        self.warnings = lines
 
     def _graph_problems(self) -> list[str]:
         try:
@@ -414,3 +384,8 @@ class CompanionNode:
         except Exception as exc:    # discovery must not stop the node
             self.log.debug("the graph could not be read: %s", exc)
             return []
+
+    @property
+    def warnings(self) -> list[str]:
+        """The active problems with the node's inputs, one line each."""
+        return self.watch.warnings
