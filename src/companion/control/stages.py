@@ -225,10 +225,9 @@ class Driving:
         return []
 
     def applied(self, s: Step, final: Command) -> None:
+        """Tell the controller the command sent, if it made this step's target."""
         if s.stepped:
             self.inner.applied(final)
-        if s.stop:
-            self.fresh = True
 
     def _ahead(self, s: Step) -> Observation:
         obs, person = s.obs, s.estimate.walker

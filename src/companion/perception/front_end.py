@@ -112,9 +112,8 @@ class OdometrySource(Source):
 
     def add(self, t: float, pose: Pose, velocity: tuple[float, float] | None) -> None:
         samples = self.samples
-        if t > self.stamp and math.isfinite(pose.x) and math.isfinite(pose.y) \
-                and math.isfinite(pose.theta):
-            self.stamp = t
+        if math.isfinite(pose.x) and math.isfinite(pose.y) and math.isfinite(pose.theta) \
+                and self.take(t):
             v = velocity if velocity is not None and math.isfinite(velocity[0]) \
                 and math.isfinite(velocity[1]) else (0.0, 0.0)
             samples.append(OdometrySample(t, pose, v))
