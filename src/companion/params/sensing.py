@@ -159,6 +159,16 @@ class TrackerParams(Validated):
     gate_floor_m: float = param(0.2, "m", "position tolerance always allowed in the gate (an "
                                 "exact sensor must not make the gate arbitrarily tight)",
                                 non_negative)
+    motion_gate_chi2: float = param(25.0, "-", "reported velocities whose mean over the "
+                                    "newest detections (up to 6, within max_delay_s) differs "
+                                    "from the slope of their positions by a squared "
+                                    "Mahalanobis distance above this are wrong: the "
+                                    "detections are used for their position only (25: about "
+                                    "4e-6 for 2 degrees of freedom); inf: always trusted",
+                                    positive_or_inf)
+    motion_floor_mps: float = param(0.2, "m/s", "tolerance always allowed in that comparison "
+                                    "(a walk that is not straight over the window)",
+                                    non_negative)
     max_person_speed: float = param(3.0, "m/s", "a detection farther from the track than this "
                                     "speed allows (plus gate_floor_m) is rejected; estimated "
                                     "speeds are clipped to it", positive)

@@ -26,9 +26,16 @@ import numpy as np
 
 from companion.geometry import major_std, segment_point, wrap_pi
 from companion.params import SensingParams, TrackerParams
+from companion.tracking.motion import (
+    MAX_DETECTIONS,
+    motion_nis,
+    reports_motion,
+    without_motion,
+)
 from companion.tracking.walker import (
     Belief,
     WalkerFilter,
+    formation_person,
     position_cov,
     position_nis,
     predict,
@@ -63,6 +70,7 @@ class _Posterior:
     belief: Belief
     inflation: float = 1.0     # the widening of the reported position covariance
     noise_scale: float = 1.0   # the learned factor on the detections' position variance
+    trusted: bool = True       # the detection's reported motion was used
 
 
 class PersonTracker:
@@ -170,17 +178,28 @@ class PersonTracker:
         if not before:                        # older than everything kept: too late to use
             reasons.append("detection_stale")
             return
-        later = [h.detection for h in self._history if h.t >= t]
+        later = [h for h in self._history if h.t >= t]
+        self._history = before
         prior = self._predicted(before[-1], t)
         best = self._best(before[-1], prior, group)
+        if best is None and not self._motion_agrees(self._nearest(group, prior)):
+            self._without_motion()            # a wrong velocity carried the prediction off
+            prior = self._predicted(self._history[-1], t)
+            best = self._best(self._history[-1], prior, group)
         if best is None:                      # a lone jump: a glitch as likely as someone
             reasons.append("person_outlier")
+            self._history += later
             return
         self.others += [d for d in group if d is not best]
-        self._history = before
-        self._apply(best, prior)
-        for d in later:                       # re-filter what came after a late detection
-            self._apply(d, self._predicted(self._history[-1], d.t), again=True)
+        trusted = self._motion_agrees(best)
+        if not trusted:
+            reasons.append("person_motion_inconsistent")
+            self._without_motion()
+            prior = self._predicted(self._history[-1], t)
+        self._apply(best, prior, trusted=trusted)
+        for h in later:                       # re-filter what came after a late detection
+            self._apply(h.detection, self._predicted(self._history[-1], h.t), again=True,
+                        trusted=h.trusted and trusted)
         horizon = self._history[-1].t - self.params.max_delay_s
         self._history = [h for h in self._history if h.t >= horizon] or self._history[-1:]
 
@@ -205,17 +224,43 @@ class PersonTracker:
         """``base`` predicted to time ``t``."""
         return self._filter.predict(base.belief, t - base.t)
 
-    def _apply(self, d: PersonDetection, prior: Belief, again: bool = False) -> None:
+    def _apply(self, d: PersonDetection, prior: Belief, again: bool = False,
+               trusted: bool = True) -> None:
         """Append the posterior of the ``prior`` at ``d``'s time updated with ``d`` (``again``:
-        a detection re-filtered after a late one, whose NIS was already reported)."""
+        a detection re-filtered after a late one, whose NIS was already reported; not
+        ``trusted``: its position only)."""
         last = self._history[-1]
         scale = last.noise_scale
         nis = position_nis(prior.x, prior.p, d, self.params, scale=scale)
         if math.isfinite(nis) and not again:
             self.innovations.append(nis)
-        self._history.append(_Posterior(d.t, d, self._filter.update(prior, d, scale),
+        used = d if trusted else without_motion(d)
+        self._history.append(_Posterior(d.t, d, self._filter.update(prior, used, scale),
                                         self._inflation(last, d, nis),
-                                        self._adapted(last, prior, d)))
+                                        self._adapted(last, prior, d), trusted))
+
+    def _motion_agrees(self, d: PersonDetection) -> bool:
+        """The velocities reported by the kept detections and ``d`` agree with their
+        positions (:mod:`.motion`); a ``d`` that reports none is not judged."""
+        window = [h.detection for h in self._history[-MAX_DETECTIONS:]] + [d]
+        return not reports_motion(d) \
+            or motion_nis(window, self.params, self.noise_scale) <= self.params.motion_gate_chi2
+
+    @staticmethod
+    def _nearest(group: list[PersonDetection], prior: Belief) -> PersonDetection:
+        return min(group, key=lambda d: math.hypot(d.x - prior.x[0], d.y - prior.x[1]))
+
+    def _without_motion(self) -> None:
+        """Re-filter the kept detections for their positions alone: their reported motion
+        disagrees with them, and the track built on it is wrong."""
+        if not any(h.trusted and reports_motion(h.detection) for h in self._history):
+            return
+        kept = self._history
+        self._history = [dataclasses.replace(self._start(without_motion(kept[0].detection)),
+                                             detection=kept[0].detection, trusted=False)]
+        for h in kept[1:]:
+            self._apply(h.detection, self._predicted(self._history[-1], h.t), again=True,
+                        trusted=False)
 
     def _inflation(self, last: _Posterior, d: PersonDetection, nis: float) -> float:
         """How much wider than the filter's the reported position covariance is after ``d``:
@@ -343,25 +388,8 @@ class PersonTracker:
             return PersonEstimate(state, std, cov, age, status, state)
         state = PersonState(float(x[0]), float(x[1]), math.atan2(x[3], x[2]),
                             math.hypot(x[2], x[3]), float(x[4]))
-        return PersonEstimate(state, std * math.sqrt(k), widened(cov, k), age, status,
-                              self._walker(state, cov))
-
-    def _walker(self, state: PersonState, cov: np.ndarray) -> PersonState:
-        """The formation's person: while standing (speed below ``standing_speed``, or its
-        heading less certain than ``walking_heading_std_rad``: positions tell no heading then)
-        facing the way it last walked, without speed or turning. A walking person's turn rate
-        is shrunk towards 0 by its uncertainty (a Wiener gain), so a poor estimate of it fades
-        out of the controllers' feedforward."""
-        p = self.params
-        across = np.array((-math.sin(state.theta), math.cos(state.theta)))
-        heading_var = float(across @ cov[2:4, 2:4] @ across)   # velocity across its direction
-        walking = state.v >= p.standing_speed \
-            and heading_var <= (p.walking_heading_std_rad * state.v) ** 2
-        if walking or self._walking is None:
-            self._walking = state.theta
-            w, var = state.omega, float(cov[4, 4])
-            return dataclasses.replace(state, omega=w * w * w / (w * w + var) if var else w)
-        return PersonState(state.x, state.y, self._walking, 0.0, 0.0)
+        walker, self._walking = formation_person(state, cov, self._walking, p)
+        return PersonEstimate(state, std * math.sqrt(k), widened(cov, k), age, status, walker)
 
 
 def _std(d: PersonDetection, p: TrackerParams) -> float:

@@ -200,3 +200,22 @@ def measurement(d: PersonDetection, p: TrackerParams, scale: float = 1.0
         r[k, k] = s * s
     r += MIN_STD ** 2 * np.eye(len(z))   # floor
     return np.array(z, dtype=float), r, heading, velocity
+
+
+def formation_person(state: PersonState, cov: np.ndarray, walking: float | None,
+                     p: TrackerParams) -> tuple[PersonState, float]:
+    """The formation's person for the estimate ``state`` with covariance ``cov``, and the
+    heading of the last walking estimate (``walking``: the one before, None at first). While
+    standing (speed below ``standing_speed``, or its heading less certain than
+    ``walking_heading_std_rad``: positions tell no heading then) the person faces the way
+    they last walked, without speed or turning. A walking person's turn rate is shrunk
+    towards 0 by its uncertainty (a Wiener gain), so a poor estimate of it fades out of the
+    controllers' feedforward."""
+    across = np.array((-math.sin(state.theta), math.cos(state.theta)))
+    heading_var = float(across @ cov[2:4, 2:4] @ across)   # velocity across its direction
+    if walking is None or state.v >= p.standing_speed \
+            and heading_var <= (p.walking_heading_std_rad * state.v) ** 2:
+        w, var = state.omega, float(cov[4, 4])
+        return (PersonState(state.x, state.y, state.theta, state.v,
+                            w * w * w / (w * w + var) if var else w), state.theta)
+    return PersonState(state.x, state.y, walking, 0.0, 0.0), walking

@@ -1,0 +1,89 @@
+"""Whether the velocity a detector reports agrees with where it puts the person.
+
+A detector that reports speed and heading (a people tracker of its own, a worn sensor) may
+report them wrong but in range: a person standing still reported walking at 3 m/s, turning
+at 2 pi rad/s. The walker filter trusts what is reported, and a wrong velocity carried over
+the detections' latency moves the estimate away from the person while its stated
+uncertainty stays small; the keep-out rules, which trust the estimate, then let the robot
+close in. The positions are the measurement that cannot be fooled this way: over a short
+window their least-squares slope is the person's mean velocity there, and the mean of the
+reported velocities over the same window must agree with it within their combined
+uncertainty (:func:`motion_nis`). Where it does not, the tracker uses the detections for
+their position only (docs/sensing.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+
+from companion.params import TrackerParams
+from companion.tracking.walker import MIN_STD
+from companion.types import PersonDetection
+
+#: Fewest detections, and shortest span of time (s), over which positions give a velocity;
+#: the most that are used (the newest), which bounds the cost at a high detection rate.
+MIN_DETECTIONS = 4
+MIN_SPAN_S = 0.15
+MAX_DETECTIONS = 6
+
+
+def reports_motion(d: PersonDetection) -> bool:
+    """``d`` reports a speed (and with it a turn rate, or a heading)."""
+    return d.speed is not None
+
+
+def without_motion(d: PersonDetection) -> PersonDetection:
+    """``d`` as a detection of the position alone."""
+    return dataclasses.replace(d, heading=None, heading_std=None, speed=None, turn_rate=None,
+                               velocity_std=None)
+
+
+def motion_nis(window: Sequence[PersonDetection], p: TrackerParams, scale: float = 1.0
+               ) -> float:
+    """Squared distance between the mean of the velocities reported over ``window`` (time
+    order, the newest last; the newest :data:`MAX_DETECTIONS` of it) and the slope of a
+    weighted least-squares line through its positions against time, over their variances
+    (isotropic bounds: a position's larger diagonal entry plus its off-diagonal one, times
+    ``scale``; a report's speed variance plus its heading's times the speed squared) and
+    ``tracker.motion_floor_mps`` squared, the tolerance for a walk that is not straight over
+    the window. Compared with ``tracker.motion_gate_chi2`` (2 degrees of freedom; without
+    headings the mean speed is compared with the slope's magnitude). 0 where the window
+    reports no speed or is too short to tell (fewer than :data:`MIN_DETECTIONS`, or less than
+    :data:`MIN_SPAN_S`)."""
+    window = window[-MAX_DETECTIONS:]
+    if len(window) < MIN_DETECTIONS or window[-1].t - window[0].t < MIN_SPAN_S:
+        return 0.0
+    t0, floor = window[-1].t, MIN_STD ** 2
+    sw = swt = swtt = swx = swtx = swy = swty = 0.0      # the positions' line
+    n = vx = vy = speed = var = across = 0.0             # the reports' mean and variance
+    directed = True
+    for d in window:
+        cov = d.covariance
+        w = 1.0 / max(scale * (max(cov[0], cov[3]) + abs(cov[1]) if cov
+                               else p.position_std_m ** 2), floor)
+        t = d.t - t0
+        sw, swt, swtt = sw + w, swt + w * t, swtt + w * t * t
+        swx, swtx, swy, swty = swx + w * d.x, swtx + w * t * d.x, swy + w * d.y, swty + w * t * d.y
+        if d.speed is None:
+            continue
+        n += 1.0
+        speed += abs(d.speed)
+        var += (d.velocity_std[0] if d.velocity_std else p.initial_speed_std) ** 2
+        if d.heading is None:
+            directed = False
+        elif directed:
+            h_std = p.heading_std_rad if d.heading_std is None else d.heading_std
+            across += (d.speed * h_std) ** 2
+            vx, vy = vx + d.speed * math.cos(d.heading), vy + d.speed * math.sin(d.heading)
+    if not n:
+        return 0.0
+    spread = sw * swtt - swt * swt
+    fx, fy = (sw * swtx - swt * swx) / spread, (sw * swty - swt * swy) / spread
+    total = var / n + sw / spread + p.motion_floor_mps ** 2   # reports, slope, floor
+    if directed:
+        nis = ((vx / n - fx) ** 2 + (vy / n - fy) ** 2) / (total + across / n)
+    else:
+        nis = (speed / n - math.hypot(fx, fy)) ** 2 / total
+    return nis if math.isfinite(nis) else math.inf
