@@ -334,6 +334,35 @@ def test_scenario_sensing_table_is_used_and_the_flag_overrides_it(tmp_path, caps
     assert float(b[-1].split(",")[std]) == 0.0      # ideal: exact
 
 
+@pytest.mark.parametrize("argv, message", [
+    (["runn"], "companion: error: argument command: invalid choice: 'runn' (choose from"),
+    (["runn"], "; did you mean 'run'? (see --help)"),
+    (["run", "line", "--controler", "lqr"], "unrecognized arguments: --controler lqr; did you "
+                                             "mean '--controller'?"),
+    (["run", "line", "--controller", "lqr-papr"], "error: run: argument --controller: invalid "
+                                                   "choice"),
+    (["run", "line", "--controller", "lqr-papr"], "did you mean 'lqr-paper'?"),
+    (["run", "line", "--sensing", "realstic"], "did you mean 'realistic'?"),
+    (["run", "line", "--side", "lef"], "did you mean 'left'?"),
+    (["evaluate", "smok"], "smok: no such suite file or shipped suite; did you mean 'smoke'?"),
+    (["tune", "lqr", "--suite", "smok"], "did you mean 'smoke'?"),
+    (["fuzz", "--contrllers", "lqr"], "did you mean '--controllers'?"),
+])
+def test_misspelt_commands_flags_and_choices_get_a_suggestion(argv, message, capsys):
+    code, out, err = run(argv, capsys)
+    assert code == 2 and message in err and err.count("\n") == 1
+    assert err.count("companion:") == 1
+
+
+def test_version_is_the_package_version(capsys):
+    from importlib.metadata import version
+
+    with pytest.raises(SystemExit) as done:
+        main(["--version"])
+    assert done.value.code == 0
+    assert capsys.readouterr().out.strip() == f"companion {version('companion')}"
+
+
 def test_cli_choices_are_the_registries():
     from companion.apps import cli
     from companion.control import CONTROLLERS

@@ -61,6 +61,24 @@ def test_fuzz_exits_1_and_names_the_seed_of_a_failing_episode(tmp_path, capsys, 
     assert json.loads((tmp_path / "fuzz.json").read_text())["failed"][0]["seed"] == 0
 
 
+def test_a_short_fuzz_without_failure_exits_0_and_says_it_cannot_bound_the_rate(
+        tmp_path, capsys, monkeypatch):
+    real = fuzz.episode_counts
+
+    def clean(log, params, obstacles=()):
+        counts = real(log, params, obstacles)
+        return dict(counts, person_collisions=0, person_collisions_robot=0,
+                    obstacle_collisions=0, violations=0, nonfinite_steps=0)
+
+    monkeypatch.setattr(fuzz, "episode_counts", clean)
+    code, out, _ = run(["fuzz", "--steps", "1", "--controllers", "vsm", "--sensing",
+                        "realistic", "--workers", "1", "--out", str(tmp_path)], capsys)
+    assert code == 0
+    assert "criterion not met: realistic: the robot-caused failure rate's 95 % upper bound" in out
+    assert "no failure found, but the run is too short to bound the rate" in out
+    assert json.loads((tmp_path / "fuzz.json").read_text())["missed_criteria"]
+
+
 def test_fuzz_runs_on_the_parameters_of_params(tmp_path, capsys):
     params = tmp_path / "p.toml"
     params.write_text("[keepout]\nevasive_horizon_s = 2.0\n")

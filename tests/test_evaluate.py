@@ -274,7 +274,9 @@ def test_tuning_on_a_suite_improves_resumes_and_writes_a_params_file(tmp_path, c
     assert len(trials) == 1 + 3
     assert main([*args, "--trials", "4"]) == 0
     assert "(4 trials)" in capsys.readouterr().out
-    assert len((tmp_path / "out" / "trials.csv").read_text().splitlines()) == 1 + 4
+    rows = (tmp_path / "out" / "trials.csv").read_text().splitlines()
+    assert len(rows) == 1 + 4
+    assert len({r.split(",")[1] for r in rows[1:]}) == 4, rows   # the resumed trial is new
     tuned = load_params(tmp_path / "out" / "best.toml")
     text = (tmp_path / "out" / "best.toml").read_text()
     assert f"kp_x = {tuned.pid.kp_x:.6g}" in text

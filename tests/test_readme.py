@@ -40,3 +40,27 @@ def test_architecture_map_names_every_module():
                      if not re.search(rf"(?<!\w){re.escape(name)}(?!\w)", block))
     assert not missing, ("README.md's architecture map does not name these modules of "
                          f"src/companion: {', '.join(missing)}")
+
+
+def test_the_measured_table_is_what_companion_run_prints(tmp_path):
+    """Every row of the README's table of ``companion run`` results, run again: RMSE rho and
+    alpha as printed there (to the digits shown)."""
+    import json
+
+    from companion.apps.cli import main
+
+    text = README.read_text()
+    table = text.split("Measured with `companion run`")[1].split("\n\n")[1]
+    rows = [r.split("|")[1:5] for r in table.splitlines()[2:]]
+    assert len(rows) >= 5
+    for scenario, controller, rho, alpha in rows:
+        name = scenario.split()[0]
+        controller = controller.split()[0]
+        out = tmp_path / f"{name}-{controller}"
+        assert main(["run", name, "--controller", controller, "--out", str(out)]) == 0
+        metrics = json.loads((out / "metrics.json").read_text())
+        rho_cm, digits = float(rho.split()[0]), rho.split()[0].partition(".")[2]
+        assert round(100 * metrics["rmse_rho_m"], len(digits)) == rho_cm, (name, controller)
+        shown = alpha.split()[0]
+        assert f"{metrics['rmse_alpha_rad']:.{len(shown.partition('.')[2])}f}" == shown, \
+            (name, controller)

@@ -11,12 +11,15 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import re
 import signal
 import sys
 import threading
 from collections.abc import Sequence
+from importlib.metadata import version
 
 from companion.apps.flags import help_range as rng
+from companion.config import hint
 from companion.errors import CompanionError
 
 # Choices spelled out so that --help and usage errors need no numpy, numba or scipy (they
@@ -28,10 +31,39 @@ SIDES = ("behind", "front", "left", "right")
 
 
 class OneLineParser(argparse.ArgumentParser):
-    """argparse, but usage errors are one line on stderr (exit code 2)."""
+    """argparse, but usage errors are one line on stderr (exit code 2) naming the command,
+    with a "did you mean" for a misspelt command, choice or flag."""
 
     def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(2, f"companion: error: {self.prog}: {message} (see --help)\n")
+        command = self.prog.removeprefix("companion").strip()
+        where = f"{command}: " if command else ""
+        self.exit(2, f"companion: error: {where}{message}{suggestion(self, message)} "
+                     "(see --help)\n")
+
+
+def suggestion(parser: argparse.ArgumentParser, message: str) -> str:
+    """The "; did you mean" suffix for argparse's ``message`` from ``parser``: the closest
+    choice to an invalid one, or the closest flag (of ``parser`` and its commands) to an
+    unrecognized one."""
+    choice = re.search(r"invalid choice: '(.*?)' \(choose from (.*)\)$", message)
+    if choice:
+        return hint(choice[1], re.findall(r"'([^']*)'", choice[2]))
+    unknown = re.search(r"unrecognized arguments: (.*)$", message)
+    if unknown:
+        flags = [f for f in unknown[1].split() if f.startswith("--")]
+        return hint(flags[0].partition("=")[0], _flags(parser)) if flags else ""
+    return ""
+
+
+def _flags(parser: argparse.ArgumentParser) -> list[str]:
+    """Every option string of ``parser`` and of its sub-commands."""
+    flags = []
+    for action in parser._actions:
+        flags += [f for f in action.option_strings if f.startswith("--")]
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                flags += _flags(sub)
+    return flags
 
 
 def _sensing(p: argparse.ArgumentParser) -> None:
@@ -54,6 +86,7 @@ def _workers(p: argparse.ArgumentParser) -> None:
 def parser() -> argparse.ArgumentParser:
     ap = OneLineParser(prog="companion",
                        description="Side-by-side companion robot control (LQR).")
+    ap.add_argument("--version", action="version", version=f"companion {version('companion')}")
     sub = ap.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
 
     run = sub.add_parser("run", help="simulate one scenario and write log.csv, metrics.json")

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from companion.config import MAX_DURATION, build, load_toml, reject_unknown
+from companion.config import MAX_DURATION, build, hint, load_toml, reject_unknown
 from companion.control import CONTROLLERS, make_controller
 from companion.errors import ConfigError
 from companion.evaluate.motions import fixed_sides, motions
@@ -107,7 +107,8 @@ def suite_path(name: str | Path) -> Path:
         return BUILTIN / f"{name}.toml"
     path = Path(name)
     if not path.exists() and path.suffix != ".toml" and len(path.parts) == 1:
-        raise ConfigError(f"{name}: no such suite file or shipped suite (shipped: "
+        raise ConfigError(f"{name}: no such suite file or shipped suite"
+                          f"{hint(str(name), builtin_suites())} (shipped: "
                           f"{', '.join(builtin_suites())})")
     return path
 

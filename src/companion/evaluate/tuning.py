@@ -185,6 +185,9 @@ def tune_on_suite(suite: Suite, controller: str, trials: int, storage: Any = Non
                                     sampler=optuna.samplers.TPESampler(seed=seed))
     except Exception as exc:        # optuna raises many kinds for a storage it cannot use
         raise ConfigError(f"--storage {url}: {_reason(exc)}") from None
+    # A resumed study draws on from a seed of its own: the seed alone would repeat the
+    # first session's draws.
+    study.sampler = optuna.samplers.TPESampler(seed=seed + len(study.trials))
     complete = optuna.trial.TrialState.COMPLETE
     if not any(t.state == complete for t in study.trials):   # the current gains first
         study.enqueue_trial({d.name: v for d, v in zip(dims, current(base, dims))})

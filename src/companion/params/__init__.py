@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from companion.config import Validated, build, load_toml, param, ranged, validate
+from companion.config import Validated, build, hint, load_toml, param, ranged, validate
 from companion.errors import ConfigError
 from companion.params.control import (
     BEHIND,
@@ -169,7 +169,7 @@ def load_sensing(name_or_path: str) -> SensingParams:
         return PROFILES[name_or_path]
     if not name_or_path.endswith(".toml"):
         raise ConfigError(f"expected {' or '.join(PROFILES)} or a .toml file, got "
-                          f"{name_or_path!r}")
+                          f"{name_or_path!r}{hint(name_or_path, PROFILES)}")
     return build(SensingParams, load_toml(name_or_path), prefix=f"{name_or_path}: ")
 
 
