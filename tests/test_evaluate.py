@@ -346,8 +346,8 @@ scenarios = [{name = "fig7", obstacles = "lidar", label = "eight"}]
 
 
 def test_an_unknown_suite_name_lists_the_shipped_ones(tmp_path):
-    with pytest.raises(ConfigError, match=r"^pedestrian: no such suite file or shipped suite "
-                                          r"\(shipped: .*pedestrians"):
+    with pytest.raises(ConfigError, match=r"^pedestrian: no such suite file or shipped suite; "
+                                          r"did you mean 'pedestrians'\? \(shipped: .*smoke"):
         load_suite("pedestrian")
     with pytest.raises(ConfigError, match="no such file"):
         load_suite(tmp_path / "missing.toml")

@@ -15,11 +15,17 @@ from companion.params import REALISTIC, Params
 from companion.sim.episode import start_in_slot
 from companion.sim.fuzz import WALKER
 from companion.sim.soak import random_walk
-from companion.tracking.motion import motion_nis
+from companion.tracking.motion import motion_nis as nis_of
+from companion.tracking.motion import motion_of
 from companion.tracking.tracker import PersonTracker
 from companion.types import Command, Observation, PersonDetection, PersonState, Pose
 
 P = Params()
+
+
+def motion_nis(window, p):
+    p = p.for_sensing(REALISTIC)
+    return nis_of([motion_of(d, p) for d in window], p.motion_floor_mps)
 
 
 def walk_window(speed, heading, reported_speed, reported_heading, n=10, std=0.05, seed=0):

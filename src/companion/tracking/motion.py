@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
+from typing import NamedTuple
 
 from companion.params import TrackerParams
 from companion.tracking.walker import MIN_STD
@@ -40,17 +41,49 @@ def without_motion(d: PersonDetection) -> PersonDetection:
                                velocity_std=None)
 
 
-def motion_nis(window: Sequence[PersonDetection], p: TrackerParams, scale: float = 1.0
-               ) -> float:
+class Motion(NamedTuple):
+    """What one detection brings to the check: its time (s), position (m), position variance
+    (m^2: the larger diagonal entry plus the off-diagonal one, a bound for any direction),
+    and its report (``reported`` False: none): the speed (m/s, absolute), the velocity
+    ``(vx, vy)`` (m/s, 0 without a heading), the speed's variance and the heading's times the
+    speed squared (m^2/s^2)."""
+
+    t: float
+    x: float
+    y: float
+    var: float
+    reported: bool
+    directed: bool
+    speed: float
+    vx: float
+    vy: float
+    speed_var: float
+    heading_var: float
+
+
+def motion_of(d: PersonDetection, p: TrackerParams) -> Motion:
+    """The :class:`Motion` of ``d`` (``p`` gives the noise of what it does not state)."""
+    c = d.covariance
+    var = max(c[0], c[3]) + abs(c[1]) if c else p.position_std_m ** 2
+    if d.speed is None:
+        return Motion(d.t, d.x, d.y, var, False, False, 0.0, 0.0, 0.0, 0.0, 0.0)
+    speed_var = (d.velocity_std[0] if d.velocity_std else p.initial_speed_std) ** 2
+    if d.heading is None:
+        return Motion(d.t, d.x, d.y, var, True, False, abs(d.speed), 0.0, 0.0, speed_var, 0.0)
+    h_std = p.heading_std_rad if d.heading_std is None else d.heading_std
+    return Motion(d.t, d.x, d.y, var, True, True, abs(d.speed), d.speed * math.cos(d.heading),
+                  d.speed * math.sin(d.heading), speed_var, (d.speed * h_std) ** 2)
+
+
+def motion_nis(window: Sequence[Motion], floor_mps: float, scale: float = 1.0) -> float:
     """Squared distance between the mean of the velocities reported over ``window`` (time
     order, the newest last; the newest :data:`MAX_DETECTIONS` of it) and the slope of a
-    weighted least-squares line through its positions against time, over their variances
-    (isotropic bounds: a position's larger diagonal entry plus its off-diagonal one, times
-    ``scale``; a report's speed variance plus its heading's times the speed squared) and
-    ``tracker.motion_floor_mps`` squared, the tolerance for a walk that is not straight over
-    the window. Compared with ``tracker.motion_gate_chi2`` (2 degrees of freedom; without
-    headings the mean speed is compared with the slope's magnitude). 0 where the window
-    reports no speed or is too short to tell (fewer than :data:`MIN_DETECTIONS`, or less than
+    weighted least-squares line through its positions against time (position variances
+    times ``scale``), over their variances and ``floor_mps`` squared, the tolerance for a
+    walk that is not straight over the window (``tracker.motion_floor_mps``). Compared with
+    ``tracker.motion_gate_chi2`` (2 degrees of freedom; where a report has no heading the
+    mean speed is compared with the slope's magnitude). 0 where the window reports no speed
+    or is too short to tell (fewer than :data:`MIN_DETECTIONS`, or less than
     :data:`MIN_SPAN_S`)."""
     window = window[-MAX_DETECTIONS:]
     if len(window) < MIN_DETECTIONS or window[-1].t - window[0].t < MIN_SPAN_S:
@@ -59,29 +92,19 @@ def motion_nis(window: Sequence[PersonDetection], p: TrackerParams, scale: float
     sw = swt = swtt = swx = swtx = swy = swty = 0.0      # the positions' line
     n = vx = vy = speed = var = across = 0.0             # the reports' mean and variance
     directed = True
-    for d in window:
-        cov = d.covariance
-        w = 1.0 / max(scale * (max(cov[0], cov[3]) + abs(cov[1]) if cov
-                               else p.position_std_m ** 2), floor)
-        t = d.t - t0
+    for t, x, y, p_var, reported, has_heading, s, mx, my, s_var, h_var in window:
+        w = 1.0 / max(scale * p_var, floor)
+        t -= t0
         sw, swt, swtt = sw + w, swt + w * t, swtt + w * t * t
-        swx, swtx, swy, swty = swx + w * d.x, swtx + w * t * d.x, swy + w * d.y, swty + w * t * d.y
-        if d.speed is None:
-            continue
-        n += 1.0
-        speed += abs(d.speed)
-        var += (d.velocity_std[0] if d.velocity_std else p.initial_speed_std) ** 2
-        if d.heading is None:
-            directed = False
-        elif directed:
-            h_std = p.heading_std_rad if d.heading_std is None else d.heading_std
-            across += (d.speed * h_std) ** 2
-            vx, vy = vx + d.speed * math.cos(d.heading), vy + d.speed * math.sin(d.heading)
+        swx, swtx, swy, swty = swx + w * x, swtx + w * t * x, swy + w * y, swty + w * t * y
+        if reported:
+            n, speed, var, across = n + 1.0, speed + s, var + s_var, across + h_var
+            vx, vy, directed = vx + mx, vy + my, directed and has_heading
     if not n:
         return 0.0
     spread = sw * swtt - swt * swt
     fx, fy = (sw * swtx - swt * swx) / spread, (sw * swty - swt * swy) / spread
-    total = var / n + sw / spread + p.motion_floor_mps ** 2   # reports, slope, floor
+    total = var / n + sw / spread + floor_mps ** 2   # reports, slope, floor
     if directed:
         nis = ((vx / n - fx) ** 2 + (vy / n - fy) ** 2) / (total + across / n)
     else:

@@ -28,7 +28,9 @@ from companion.geometry import major_std, segment_point, wrap_pi
 from companion.params import SensingParams, TrackerParams
 from companion.tracking.motion import (
     MAX_DETECTIONS,
+    Motion,
     motion_nis,
+    motion_of,
     reports_motion,
     without_motion,
 )
@@ -71,6 +73,7 @@ class _Posterior:
     inflation: float = 1.0     # the widening of the reported position covariance
     noise_scale: float = 1.0   # the learned factor on the detections' position variance
     trusted: bool = True       # the detection's reported motion was used
+    motion: Motion | None = None   # what the detection brings to the motion check
 
 
 class PersonTracker:
@@ -182,8 +185,9 @@ class PersonTracker:
         self._history = before
         prior = self._predicted(before[-1], t)
         best = self._best(before[-1], prior, group)
-        if best is None and not self._motion_agrees(self._nearest(group, prior)):
-            self._without_motion()            # a wrong velocity carried the prediction off
+        if best is None and not self._motion_agrees(   # a wrong velocity carried it off?
+                min(group, key=lambda d: math.hypot(d.x - prior.x[0], d.y - prior.x[1]))):
+            self._without_motion()
             prior = self._predicted(self._history[-1], t)
             best = self._best(self._history[-1], prior, group)
         if best is None:                      # a lone jump: a glitch as likely as someone
@@ -226,9 +230,8 @@ class PersonTracker:
 
     def _apply(self, d: PersonDetection, prior: Belief, again: bool = False,
                trusted: bool = True) -> None:
-        """Append the posterior of the ``prior`` at ``d``'s time updated with ``d`` (``again``:
-        a detection re-filtered after a late one, whose NIS was already reported; not
-        ``trusted``: its position only)."""
+        """Append the ``prior`` updated with ``d`` (not ``trusted``: its position only;
+        ``again``: re-filtered after a late detection, its NIS already reported)."""
         last = self._history[-1]
         scale = last.noise_scale
         nis = position_nis(prior.x, prior.p, d, self.params, scale=scale)
@@ -237,27 +240,25 @@ class PersonTracker:
         used = d if trusted else without_motion(d)
         self._history.append(_Posterior(d.t, d, self._filter.update(prior, used, scale),
                                         self._inflation(last, d, nis),
-                                        self._adapted(last, prior, d), trusted))
+                                        self._adapted(last, prior, d), trusted,
+                                        motion_of(d, self.params)))
 
     def _motion_agrees(self, d: PersonDetection) -> bool:
         """The velocities reported by the kept detections and ``d`` agree with their
         positions (:mod:`.motion`); a ``d`` that reports none is not judged."""
-        window = [h.detection for h in self._history[-MAX_DETECTIONS:]] + [d]
+        p = self.params
+        window = [h.motion for h in self._history[1 - MAX_DETECTIONS:]] + [motion_of(d, p)]
         return not reports_motion(d) \
-            or motion_nis(window, self.params, self.noise_scale) <= self.params.motion_gate_chi2
-
-    @staticmethod
-    def _nearest(group: list[PersonDetection], prior: Belief) -> PersonDetection:
-        return min(group, key=lambda d: math.hypot(d.x - prior.x[0], d.y - prior.x[1]))
+            or motion_nis(window, p.motion_floor_mps, self.noise_scale) <= p.motion_gate_chi2
 
     def _without_motion(self) -> None:
-        """Re-filter the kept detections for their positions alone: their reported motion
-        disagrees with them, and the track built on it is wrong."""
+        """Re-filter the kept detections for their positions alone (their reports are wrong)."""
         if not any(h.trusted and reports_motion(h.detection) for h in self._history):
             return
         kept = self._history
         self._history = [dataclasses.replace(self._start(without_motion(kept[0].detection)),
-                                             detection=kept[0].detection, trusted=False)]
+                                             detection=kept[0].detection, trusted=False,
+                                             motion=kept[0].motion)]
         for h in kept[1:]:
             self._apply(h.detection, self._predicted(self._history[-1], h.t), again=True,
                         trusted=False)
@@ -295,7 +296,8 @@ class PersonTracker:
     def _start(self, d: PersonDetection) -> _Posterior:
         """A new track at ``d``, keeping what was learned of the detector's noise."""
         scale = self._history[-1].noise_scale if self._history else 1.0
-        return _Posterior(d.t, d, self._filter.start(d), noise_scale=scale)
+        return _Posterior(d.t, d, self._filter.start(d), noise_scale=scale,
+                          motion=motion_of(d, self.params))
 
     def _reacquire(self, group: list[PersonDetection], reasons: list[str]) -> None:
         """No track (or lost): the first detection starts one; after a loss, detections must
