@@ -41,6 +41,16 @@ def test_fig4_animation_is_the_whole_lap_at_twice_real_time_and_small(out):
     assert (out / "fig4.gif").stat().st_size < 3_000_000
 
 
+@pytest.mark.parametrize("name", ["fig4.gif", "fig3_1mps.png"])
+def test_the_readme_images_are_what_reproduce_writes(out, name):
+    """The README shows docs/img copies of these: byte for byte what the code writes now
+    (when this fails, copy the new one from a run of the README's main command)."""
+    from pathlib import Path
+
+    shown = Path(__file__).resolve().parents[1] / "docs" / "img" / name
+    assert (out / name).read_bytes() == shown.read_bytes(), f"docs/img/{name} is stale"
+
+
 def test_table2_has_every_controller_and_trajectory(out):
     with open(out / "table2.csv") as fh:
         rows = list(csv.DictReader(fh))
