@@ -312,3 +312,44 @@ def robot_command(estimate=...):
         s = PersonState(1.5, 2.0, 0.3, 1.0, 0.1)
         estimate = PersonEstimate(s, 0.05, np.zeros((5, 5)), 0.0, "seen", s)
     return Command(0.5, 0.1), StepReport(estimate=estimate)
+
+
+def test_a_node_on_the_system_clock_says_so_when_a_clock_is_published():
+    """sim-robot in lock step publishes /clock; a node left on the system clock (no
+    use_sim_time) takes every input as stale: within a second of its time it says that a clock
+    is published and it ignores it, and the robot sees that the node never started."""
+    sc = load_scenario("line")
+    bus, transport = graph()
+    node_cfg = dataclasses.replace(config_from_mapping({"ros": {"person_type": "point"}}),
+                                   params=sc.params, controller=sc.controller)
+    node = CompanionNode(node_cfg, transport())
+    robot_ros = config_from_mapping({"ros": {"use_sim_time": True,
+                                             "person_type": "point"}}).ros
+    said = []
+
+    def after(t):
+        tick(node, node.now())
+        said.append((t, list(node.warnings)))
+
+    spec = dataclasses.replace(sc.episode(), duration=3.0)
+    log, robot = run_sim_robot(spec, transport(), robot_ros, Pacer(0.0), after=after)
+    first = next(t for t, w in said if any("a clock is published, but the node keeps the "
+                                           "system clock" in line for line in w))
+    assert first <= 1.0 + 1e-9
+    assert robot.started is False and set(log["status"]) == {"stopped"}
+
+
+def test_a_node_on_the_clock_starts_the_loop():
+    _, log, robot, _ = lockstep("ideal", "point", 2.0, "line")
+    assert robot.started is True and "ok" in set(log["status"])
+
+
+def test_use_sim_time_is_a_flag_of_the_node_command():
+    from companion.apps.cli import parser
+    from companion.apps.rosapps import _ros_overrides
+    from companion.ros.settings import RosParams
+
+    args = parser().parse_args(["node", "--scenario", "line", "--use-sim-time"])
+    assert _ros_overrides(RosParams(), args).use_sim_time
+    args = parser().parse_args(["node", "--scenario", "line"])
+    assert not _ros_overrides(RosParams(), args).use_sim_time

@@ -288,6 +288,8 @@ def _ros_commands(sub) -> None:
                     f"{rng('--duration', 'S')} (default: run until SIGINT or SIGTERM)")
     nd.add_argument("--bag", metavar="DIR", help="record what the node receives and sends, "
                     "and a Foxglove scene, as a ROS 2 bag (MCAP) (docs/recording.md)")
+    nd.add_argument("--use-sim-time", action="store_true", help="take time from /clock, as "
+                    "`companion sim-robot --lockstep` or --rate publishes it (ros.use_sim_time)")
     nd.add_argument("--sensing", metavar="PROFILE", help="ideal, realistic, em-tracker or a "
                     "TOML file of sensing keys: the base's actuator lag the node allows for, as "
                     "sim-robot --sensing (docs/sensing.md); default: the parameters'")
@@ -307,7 +309,7 @@ def _ros_commands(sub) -> None:
                     "other than 1 publishes /clock (use_sim_time) (default 1)")
     sr.add_argument("--lockstep", action="store_true", help="lock step with the node: "
                     "publish /clock and move on only once the node answered each period's "
-                    "/clock (at most 2 s); the node needs ros.use_sim_time")
+                    "/clock (at most 2 s); start the node with --use-sim-time")
     sr.add_argument("--wait", default="10", metavar="S", help="wait up to S s for the node's "
                     f"first command before starting, {rng('--wait', 'S')} (default 10)")
     sr.add_argument("--duration", metavar="S", help=f"simulated time, {rng('--duration', 'S')}")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import signal
+import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -37,6 +38,8 @@ def _ros_overrides(ros, args: argparse.Namespace):
         changes["zenoh_connect"] = args.zenoh_connect
     if args.domain_id is not None:
         changes["domain_id"] = int(number_arg(str(args.domain_id), "--domain-id", "N"))
+    if getattr(args, "use_sim_time", False):
+        changes["use_sim_time"] = True
     return dataclasses.replace(ros, **changes)
 
 
@@ -190,6 +193,12 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
                 return stop.code or 130
     finally:
         transport.close()
+    if robot.started is False:
+        status, reason = robot.report.status, robot.report.reason
+        print(f"companion sim-robot: the node kept the robot stopped for the whole run (its "
+              f"last status: {status}: {reason}); nothing written. With --lockstep or --rate "
+              f"the node must take /clock: companion node --use-sim-time", file=sys.stderr)
+        return 1
     with Outputs(out, "sim-robot") as stage:
         m, written = _write_run(stage, sc, False, [log], {"controller": "(over ROS 2)",
                                                           "commands_received": robot.commands})

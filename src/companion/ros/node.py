@@ -117,7 +117,7 @@ class CompanionNode:
         if r.person_type != "auto" or getattr(tr, "multi_type_topics", True):
             for msgtype in person_types(r.person_type):
                 self._take_people(msgtype)
-        if r.use_sim_time:
+        if t.clock:                    # without use_sim_time: to say that it is ignored
             tr.subscribe(t.clock, "rosgraph_msgs/msg/Clock", self.on_clock,
                          Qos(reliable=False, depth=1))
         if self.tf is not None and t.tf:
@@ -211,6 +211,11 @@ class CompanionNode:
             self._people.extend((p, self._arrival()) for p in people)
 
     def on_clock(self, msg: Any) -> None:
+        if not self.config.ros.use_sim_time:      # a simulator's stamps will all look stale
+            self.watch.placing["clock"] = (f"{self.config.ros.topics.clock}: a clock is "
+                                           "published, but the node keeps the system clock "
+                                           "(ros.use_sim_time is false: --use-sim-time)")
+            return
         t = self._base(msg.clock).seconds(msg.clock)
         with self._lock:
             self._sim_time = t

@@ -99,6 +99,8 @@ class WireRobot:
         self._status = ("ok", "")        # the node's last word on /companion/status
         self._estimate: PersonEstimate | None = None   # and its person estimate
         self.commands = 0
+        #: Whether the node ever said it was not stopped (None: it has no status topic).
+        self.started: bool | None = False if t.status else None
         transport.subscribe(t.cmd_vel, cmd_type, self._on_cmd, DEFAULT)
         if t.status:
             transport.subscribe(t.status, "diagnostic_msgs/msg/DiagnosticArray",
@@ -117,6 +119,7 @@ class WireRobot:
         status, estimate = convert.status_of(msg), convert.estimate_of(msg)
         with self._lock:
             self._status, self._estimate = status, estimate
+            self.started = self.started or status[0] != "stopped"
 
     def wait_for_node(self, timeout: float) -> bool:
         """Wait up to ``timeout`` s for a first /cmd_vel (with ``use_sim_time``, /clock stays
