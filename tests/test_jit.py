@@ -129,3 +129,14 @@ def test_warm_up_loads_every_kernel_without_the_simulator_and_nothing_compiles_a
     assert done.returncode == 0, done.stderr
     result = json.loads(done.stdout.strip().splitlines()[-1])
     assert result == {"cold": [], "loaded": [], "new": []}
+
+
+def test_a_cache_without_kernels_is_cold(tmp_path, monkeypatch):
+    """The CLI says it compiles (about half a minute) exactly when no kernel of these sources
+    is cached yet."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    assert _jit.cold()
+    kernel = _jit.cache_dir() / "control_0123" / "lqr.step-1.py311.nbi"
+    kernel.parent.mkdir(parents=True)
+    kernel.write_bytes(b"")
+    assert not _jit.cold()

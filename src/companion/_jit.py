@@ -80,6 +80,11 @@ def warm_up() -> None:
             dispatcher(*example())
 
 
+def cold() -> bool:
+    """No kernel of these sources is in the cache yet: the first run compiles them all."""
+    return not any(cache_dir().rglob("*.nbi"))
+
+
 def source_digest(root: Path = PACKAGE) -> str:
     """SHA-1 (12 hex digits) of the paths and contents of every ``.py`` file under ``root``."""
     h = hashlib.sha1()

@@ -367,8 +367,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         from threadpoolctl import threadpool_limits
 
+        from companion import _jit
         from companion.apps import commands
 
+        if args.command != "scenarios" and _jit.cold():
+            print("companion: compiling the numerical kernels for these sources, once (about "
+                  "half a minute; later runs load them)", file=sys.stderr, flush=True)
         # The controller's matrices are 5x5: BLAS threads only cost hand-over time.
         with threadpool_limits(limits=1):
             if "." in args.func:    # a command of another module: "module.function"

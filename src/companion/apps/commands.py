@@ -149,6 +149,11 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
     return 0
 
 
+#: Simulated seconds of the soak per second of wall time on the 2-core machine of
+#: docs/performance.md (600 s took 7.2 s, 2 s of it starting up).
+SOAK_PACE = 115.0
+
+
 def cmd_soak(args: argparse.Namespace) -> int:
     params = params_arg(args)
     checked_controllers([args.controller], params, args.params)
@@ -156,7 +161,8 @@ def cmd_soak(args: argparse.Namespace) -> int:
     seed = seed_arg(args.seed)
     out = output_dir(Path(args.out or Path("out") / "soak"))
     print(f"soak: {duration:g} s of a random walker among pillars (seed {seed}), "
-          f"controller {args.controller}; about {duration / 25:.0f} s")
+          f"controller {args.controller}; about {2 + duration / SOAK_PACE:.0f} s on a 2-core "
+          f"machine", flush=True)
     suite = soak_suite(duration, seed, args.controller, params)
     # with --log the episode runs here, its log going to disk as it runs; else through the
     # engine, kept in --out once run (as evaluate keeps its episodes)
