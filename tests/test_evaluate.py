@@ -352,3 +352,30 @@ def test_an_unknown_suite_name_lists_the_shipped_ones(tmp_path):
     with pytest.raises(ConfigError, match="no such file"):
         load_suite(tmp_path / "missing.toml")
 
+
+
+def test_an_interrupted_evaluate_says_what_it_kept_and_the_next_run_resumes(
+        tmp_path, capsys, monkeypatch):
+    """Ctrl-C after 3 of 8 episodes: exit 130, one line saying 3 of 8 are kept and that the
+    same command continues; the next run says it resumes from them and finishes."""
+    from companion.evaluate import run as engine
+
+    real = engine._backend
+
+    def interrupted(dask, workers, specs, reduce):
+        for n, item in enumerate(real(dask, workers, specs, reduce)):
+            if n == 3:
+                raise KeyboardInterrupt
+            yield item
+
+    path, out = _suite(tmp_path), tmp_path / "out"
+    args = ["evaluate", str(path), "--out", str(out), "--workers", "1"]
+    monkeypatch.setattr(engine, "_backend", interrupted)
+    assert main(args) == 130
+    err = capsys.readouterr().err
+    assert f"tiny: stopped with 3 of 8 episodes kept in {out / '.evaluate.partial'}; the same " \
+           "command continues from them" in err
+    monkeypatch.setattr(engine, "_backend", real)
+    assert main(args) == 0
+    assert f"resuming: 3 of 8 episodes kept in {out / '.evaluate.partial'}" \
+        in capsys.readouterr().out

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import re
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -18,7 +19,7 @@ from companion.apps.args import UsageError, int_arg, output_dir, seed_arg, worke
 from companion.apps.progress import progress_bar
 from companion.evaluate.report import write_episodes, write_summary
 from companion.evaluate.rows import failed
-from companion.evaluate.run import finish, run_suite
+from companion.evaluate.run import PARTIAL, finish, kept_count, run_suite
 from companion.evaluate.stats import summarize
 from companion.evaluate.suite import Suite, load_suite
 from companion.evaluate.tuning import as_toml, open_storage, tune_on_suite
@@ -46,8 +47,19 @@ def evaluate(suite: Suite, out: Path, workers: int | None, dask: str | None = No
           f"reference {suite.reference}) on "
           f"{'local worker processes' if dask is None else 'Dask ' + dask}")
     if rows is None:
-        with progress_bar(len(suite.episodes), "episode") as bar:
-            rows = run_suite(suite, out, workers, dask, lambda done, total: bar(done))
+        total, partial = len(suite.episodes), out / PARTIAL
+        if kept_count(suite, out):
+            print(f"resuming: {kept_count(suite, out)} of {total} episodes kept in {partial}",
+                  flush=True)
+        try:
+            with progress_bar(total, "episode") as bar:
+                rows = run_suite(suite, out, workers, dask, lambda done, total: bar(done))
+        except BaseException as exc:
+            if not isinstance(exc, Exception):      # Ctrl-C, SIGTERM: say what is kept
+                print(f"{suite.name}: stopped with {kept_count(suite, out)} of {total} "
+                      f"episodes kept in {partial}; the same command continues from them",
+                      file=sys.stderr, flush=True)
+            raise
     summary = summarize(rows, suite.reference)
     with Outputs(out, "evaluate") as stage:
         write_episodes(stage / "episodes.csv", rows)

@@ -57,7 +57,7 @@ def run_results(suite: Suite, out: Path | None = None, workers: int | None = Non
         from companion.evaluate.dask_backend import check_address
         check_address(dask)
     store = None if out is None else Path(out) / PARTIAL / "episodes.jsonl"
-    digest = f"{suite.digest}:{_name(suite.row)}:{code_digest()}"
+    digest = _digest(suite)
     kept, done = (False, {}) if store is None else _load(store, digest)
     todo = [e for e in suite.episodes if e.key not in done]
     total = len(suite.episodes)
@@ -104,6 +104,17 @@ def suite_rows(suite: Suite, results: dict[str, dict]) -> list[dict]:
     (``results`` by episode key)."""
     return [{**e.factors, "episode": e.key, "pair": e.pair, **results[e.key]}
             for e in suite.episodes]
+
+
+def kept_count(suite: Suite, out: Path) -> int:
+    """How many of ``suite``'s results an earlier, unfinished run kept in ``out``."""
+    _, done = _load(Path(out) / PARTIAL / "episodes.jsonl", _digest(suite))
+    return sum(e.key in done for e in suite.episodes)
+
+
+def _digest(suite: Suite) -> str:
+    """What kept results must have been made with: the suite, its row function, the code."""
+    return f"{suite.digest}:{_name(suite.row)}:{code_digest()}"
 
 
 def finish(out: Path) -> None:
