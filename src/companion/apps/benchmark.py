@@ -62,19 +62,23 @@ def timed(controller: Controller, seconds: list[float]) -> Controller:
 
 
 def latencies_us(makers: dict[str, tuple[Callable[[], Controller], Params]], sc: Scenario,
-                 duration: float, rounds: int = LATENCY_ROUNDS) -> dict[str, dict]:
+                 duration: float, rounds: int = LATENCY_ROUNDS,
+                 progress: Callable[[str], None] = lambda s: None) -> dict[str, dict]:
     """Median and p99 (us) of the step time of each controller of ``makers`` (a factory and
     the parameters of its episodes) over ``rounds`` episodes of ``sc``'s person (``duration``
-    s) after a warm-up episode each, the controllers visited in turn."""
+    s) after a warm-up episode each, the controllers visited in turn; ``progress`` after the
+    warm-up and each round."""
     seconds: dict[str, list[float]] = {name: [] for name in makers}
     runs = {name: (timed(make(), seconds[name]), params)
             for name, (make, params) in makers.items()}
     for name, (c, params) in runs.items():
         run_episode(c, sc.person, params, duration)
         seconds[name].clear()
-    for _ in range(rounds):
+    progress("  warm-up done")
+    for k in range(rounds):
         for c, params in runs.values():
             run_episode(c, sc.person, params, duration)
+        progress(f"  round {k + 1} of {rounds} done")
     return {name: {"median": float(np.median(np.asarray(s) * 1e6)),
                    "p99": float(np.percentile(np.asarray(s) * 1e6, 99))}
             for name, s in seconds.items()}
@@ -188,7 +192,7 @@ def run(n_episodes: int = 48, duration: float = 60.0, workers: int | None = None
         makers["realistic " + name] = (lambda n=name: make_controller(n, realistic)), realistic
     scipy = ideal.replace(lqr=dataclasses.replace(ideal.lqr, solver="scipy"))
     makers["scipy"] = (lambda: make_bare("lqr", scipy)), scipy
-    latency = latencies_us(makers, sc, duration)
+    latency = latencies_us(makers, sc, duration, progress=progress)
     result["step_us"] = {name: {"alone": latency[name], "stack": latency["stack " + name],
                                 "stack_realistic": latency["realistic " + name]}
                          for name in CONTROLLERS}
@@ -201,7 +205,9 @@ def run(n_episodes: int = 48, duration: float = 60.0, workers: int | None = None
         for name, s in result["step_us"].items() if "stack" in s}
     specs = episodes(sc, n_episodes, duration)
     progress(f"full-stack throughput: {n_episodes} episodes with 1 worker, then {workers}")
-    one, many = steps_per_s(specs, 1), steps_per_s(specs, workers)
+    one = steps_per_s(specs, 1)
+    progress(f"  1 worker: {one:,.0f} steps/s")
+    many = steps_per_s(specs, workers)
     result["throughput"] = {"episodes": n_episodes, "workers": workers,
                             "steps_per_s_one_worker": one, "steps_per_s_all_workers": many}
     result["peak_rss_mb"] = peak_rss_mb()
