@@ -353,3 +353,15 @@ def test_use_sim_time_is_a_flag_of_the_node_command():
     assert _ros_overrides(RosParams(), args).use_sim_time
     args = parser().parse_args(["node", "--scenario", "line"])
     assert not _ros_overrides(RosParams(), args).use_sim_time
+
+
+def test_sim_robot_says_how_far_it_is_every_five_seconds_of_wall_time(capsys, monkeypatch):
+    from companion.apps import rosapps
+
+    wall = iter([0.0, 1.0, 5.5, 5.6, 6.0, 10.7, 10.8])
+    monkeypatch.setattr(rosapps.time, "monotonic", lambda: next(wall))
+    sample = rosapps.progress_lines(60.0)
+    for t in (0.05, 0.1, 0.15, 0.2):
+        sample(t)
+    assert capsys.readouterr().out.splitlines() == ["companion sim-robot: 0.1 of 60 s",
+                                                    "companion sim-robot: 0.2 of 60 s"]

@@ -8,7 +8,8 @@ import dataclasses
 import signal
 import sys
 import threading
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -45,6 +46,21 @@ def _ros_overrides(ros, args: argparse.Namespace):
 
 #: How long ``sim-robot --lockstep`` waits each period for the node's command (wall time).
 LOCKSTEP_WAIT_S = 2.0
+#: sim-robot says how far it is every this many seconds of wall time.
+PROGRESS_S = 5.0
+
+
+def progress_lines(duration: float) -> Callable[[float], None]:
+    """A sample callback that prints ``t of duration s`` at most every :data:`PROGRESS_S` s
+    of wall time (a run in lock step with a slow or silent node can take long)."""
+    last = time.monotonic()
+
+    def sample(t: float) -> None:
+        nonlocal last
+        if time.monotonic() - last >= PROGRESS_S:
+            last = time.monotonic()
+            print(f"companion sim-robot: {t:.1f} of {duration:g} s", flush=True)
+    return sample
 
 
 class Stop(threading.Event):
@@ -183,11 +199,13 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
                 with bag_outputs(bag) as staged:
                     if staged is None:
                         log, robot = run_sim_robot(sc.episode(), transport, ros, pacer,
-                                                   epoch, wait_s=wait, lockstep_s=lockstep)
+                                                   epoch, progress_lines(sc.duration),
+                                                   wait_s=wait, lockstep_s=lockstep)
                     else:
                         log, robot = recording_sim_robot(sc.episode(), transport, ros, pacer,
                                                          epoch, staged, wait_s=wait,
-                                                         lockstep_s=lockstep)
+                                                         lockstep_s=lockstep,
+                                                         after=progress_lines(sc.duration))
             except Interrupted:
                 print("companion sim-robot: interrupted; nothing written", flush=True)
                 return stop.code or 130
