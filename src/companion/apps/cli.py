@@ -125,7 +125,8 @@ def parser() -> argparse.ArgumentParser:
     run.set_defaults(func="cmd_run")
 
     rp = sub.add_parser("reproduce", help="the paper's Fig. 3, Table 2, Fig. 4, Fig. 7 and Table 3 "
-                        "(realistic sensing)")
+                        "(its real-robot runs simulated with an EM-tracker-like and a "
+                        "leg-tracker-like sensor)")
     rp.add_argument("--out", metavar="DIR", help="output folder (default out/reproduce); a "
                     "killed run keeps the tables' episodes there for the next call")
     _dask(rp)
