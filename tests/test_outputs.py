@@ -65,15 +65,16 @@ def test_other_commands_files_and_the_kept_episodes_survive_a_switch(tmp_path):
         write_text(stage / "fuzz.csv", "fuzz")
     (tmp_path / ".evaluate.partial").mkdir()
     (tmp_path / ".evaluate.partial" / "episodes.jsonl").write_text("kept\n")
+    (tmp_path / "mine.tmp").write_text("mine")                # a user's file, whatever its name
     inode = (tmp_path / "fuzz.csv").stat().st_ino
     with Outputs(tmp_path, "fuzz-replay") as stage:
         write_text(stage / "log.csv", "replay")
-    assert listing(tmp_path) == ["fuzz.csv", "log.csv"]
+    assert listing(tmp_path) == ["fuzz.csv", "log.csv", "mine.tmp"]
     assert (tmp_path / "fuzz.csv").stat().st_ino == inode
     assert (tmp_path / ".evaluate.partial" / "episodes.jsonl").read_text() == "kept\n"
     with Outputs(tmp_path, "fuzz") as stage:                # replaces its own files only
         write_text(stage / "fuzz.json", "fuzz 2")
-    assert listing(tmp_path) == ["fuzz.json", "log.csv"]
+    assert listing(tmp_path) == ["fuzz.json", "log.csv", "mine.tmp"]
 
 
 def test_the_folder_keeps_its_mode_and_a_link_to_it_keeps_pointing_at_it(tmp_path):

@@ -149,18 +149,19 @@ class Outputs:
     ``.old`` one likewise after it; ``.tmp`` folders are removed. The layout of earlier versions
     is converted by the first switch: plain files listed in ``.<command>.outputs`` are
     replaced, and the symbolic links through ``.<command>@current`` into hidden generation
-    folders become plain files (the generations and links go).
+    folders become plain files (the generations and links go). Switches beside each other
+    take turns (a lock on the parent folder); a command writing into ``folder`` itself (its
+    resumable store) while another switches it may lose what it writes in that moment.
     """
 
     _count = 0
-    _active: set[str] = set()
 
     def __init__(self, folder: str | Path, command: str):
         self.folder, self.command = Path(folder), command
         self._pid = os.getpid()
         Outputs._count += 1
         self._tag = f"{self._pid}-{Outputs._count}"
-        self.stage = self.folder
+        self.stage = sibling(self.folder.absolute(), self._tag, "tmp")   # resolved on entry
 
     def __enter__(self) -> Path:
         self.folder.absolute().parent.mkdir(parents=True, exist_ok=True)
@@ -251,14 +252,16 @@ class _Layout:
 
 
 _OUR_LINK = re.compile(r"\.(?P<command>[^/]+)@current/[^/]+")
+#: What earlier versions kept in an output folder besides the outputs (generations, current
+#: links, staging folders) and the temporary files of interrupted writes: not carried over.
+_EARLIER = re.compile(r"\..+@(current|\d+-\d+)|\.staging-.*|\..*\.tmp")
 
 
 def _layout(folder: Path) -> _Layout:
     layout = _Layout()
     for path in sorted(folder.iterdir()):
         name = path.name
-        if re.fullmatch(r"\..+@.+", name) or name.startswith(".staging-") \
-                or name.endswith(".tmp"):
+        if _EARLIER.fullmatch(name):
             continue               # earlier versions' generations and links; temporaries
         if path.is_symlink():
             match = _OUR_LINK.fullmatch(os.readlink(path))
