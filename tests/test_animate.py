@@ -1,6 +1,7 @@
 """Animations: `companion run --animate FILE` and the helpers behind fig4.gif."""
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -52,8 +53,9 @@ def test_the_other_outputs_are_unaffected_and_the_gif_is_an_output_of_the_run(an
     plain, anim = animated
     for name in ("log.csv", "metrics.json"):
         assert (plain / name).read_bytes() == (anim / name).read_bytes(), name
-    assert sorted(p.name for p in (anim / ".run@current").iterdir()) == [
+    assert json.loads((anim / ".run.outputs").read_text()) == [
         "log.csv", "metrics.json", "run.gif"]
+    assert not any(p.is_symlink() for p in anim.iterdir())
     assert leftovers(anim) == []
 
 
@@ -64,7 +66,25 @@ def test_an_animation_outside_the_output_folder_is_written_there(tmp_path, capsy
     assert Image.open(target).n_frames == 20
     assert str(target) in capsys.readouterr().out
     assert [p.name for p in target.parent.iterdir()] == ["fig4.gif"]
-    assert not (tmp_path / "o" / ".run@current" / "fig4.gif").exists()
+    assert "fig4.gif" not in json.loads((tmp_path / "o" / ".run.outputs").read_text())
+    assert not (tmp_path / "o" / "fig4.gif").exists()
+
+
+def test_the_last_line_names_every_file_by_a_path_from_the_current_folder(tmp_path, capsys,
+                                                                           monkeypatch):
+    """Not "x.gif in o" when x.gif is elsewhere: each path opens from where the command ran."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "here").mkdir()
+    monkeypatch.chdir(tmp_path / "here")
+    assert main(["run", "fig4", "--duration", "1", "--out", "o",
+                 "--animate", "../movies/x.gif"]) == 0
+    last = capsys.readouterr().out.splitlines()[-1]
+    assert last == "wrote o/log.csv, o/metrics.json, ../movies/x.gif"
+    assert (tmp_path / "movies" / "x.gif").is_file() and (tmp_path / "here" / "o" / "log.csv"
+                                                            ).is_file()
+    assert main(["run", "fig4", "--duration", "1", "--out", "o", "--animate", "o/y.gif"]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == \
+        "wrote o/log.csv, o/metrics.json, o/y.gif"
 
 
 @pytest.mark.parametrize("name, message", [

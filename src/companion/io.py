@@ -1,6 +1,7 @@
 """Files in and out: input cells parsed with one-line errors, outputs written whole or not at
 all (to a temporary file, then renamed), and a command's outputs switched together in one
-rename (:class:`Outputs`)."""
+step (:class:`Outputs`: a new folder built beside the output folder, then renamed into
+place)."""
 
 from __future__ import annotations
 
@@ -9,13 +10,17 @@ import json
 import os
 import re
 import shutil
+import stat
 import tempfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Any
 
-from companion.errors import DataError
+from companion.errors import CompanionError, DataError
+from companion.swap import ACTIVE, leftovers, locked, remove_stale, sibling, switch, unswitchable
+
+__all__ = ["leftovers"]
 
 #: Largest magnitude of a number in a data file (m, s): beyond it a cell is corrupt.
 MAX_CELL = 1e6
@@ -122,18 +127,31 @@ def save_figure(fig: Any, path: str | Path, dpi: int = 120) -> Path:
 
 
 class Outputs:
-    """The outputs of one run of ``command`` in ``folder``, all or nothing, switched in one step.
+    """The outputs of one run of ``command`` in ``folder``: plain files and folders, all or
+    nothing, switched in one step.
 
-    ``with Outputs(folder, "run") as stage:`` gives a new hidden folder inside ``folder`` (a
-    generation, ``.run@<pid>-<n>``) to write into. When the block ends normally every output
-    name appears in ``folder`` as a symbolic link through ``.run@current`` (``log.csv ->
-    .run@current/log.csv``), and ``.run@current`` is re-pointed from the previous generation
-    to the new one by a single rename: a reader sees the previous run's set or the new one,
-    never a mix, whenever the process is killed. Names the previous run wrote and this one did
-    not are removed, and so is the previous generation. When the block ends with an exception
-    (an error, Ctrl-C, SIGTERM) the generation is removed and ``folder`` is left as it was.
-    What a killed process left behind (a generation that never became current, links to
-    names the current run lacks) is removed on the next entry.
+    ``with Outputs(folder, "run") as stage:`` gives a new hidden folder beside ``folder`` (in
+    its parent: ``.<folder name>.companion-<pid>-<n>.tmp``) to write the outputs into. When
+    the block ends normally the rest of ``folder`` (what is not this command's previous
+    output: other commands' files, ``.evaluate.partial``) is carried into it as hard links,
+    with ``.<command>.outputs`` listing the command's names; it is renamed
+    ``.<...>.new`` (from then on it is complete), and that folder and ``folder`` are swapped
+    in one rename (``renameat2`` with ``RENAME_EXCHANGE``; where the system has none: ``folder``
+    renamed to ``.<...>.old``, then the new one to ``folder``); the old set is then removed. A
+    reader sees the previous set or the new one, never a mix, whenever the process is
+    killed. When the block ends with an exception (an error, Ctrl-C, SIGTERM) the temporary
+    folder is removed and ``folder`` is left as it was.
+
+    Recovery, on the next entry for ``folder``, of what processes that no longer exist left:
+    a ``.new`` folder is moved to ``folder`` if ``folder`` is missing or empty (the switch was
+    killed between its two renames: the set is complete; ``--out`` checks may have made an
+    empty folder since, and a switched folder always holds its manifest), else removed; an
+    ``.old`` one likewise after it; ``.tmp`` folders are removed. The layout of earlier versions
+    is converted by the first switch: plain files listed in ``.<command>.outputs`` are
+    replaced, and the symbolic links through ``.<command>@current`` into hidden generation
+    folders become plain files (the generations and links go). Switches beside each other
+    take turns (a lock on the parent folder); a command writing into ``folder`` itself (its
+    resumable store) while another switches it may lose what it writes in that moment.
     """
 
     _count = 0
@@ -142,139 +160,146 @@ class Outputs:
         self.folder, self.command = Path(folder), command
         self._pid = os.getpid()
         Outputs._count += 1
-        self.stage = self.folder / f".{command}{MARK}{self._pid}-{Outputs._count}"
+        self._tag = f"{self._pid}-{Outputs._count}"
+        self.stage = sibling(self.folder.absolute(), self._tag, "tmp")   # resolved on entry
 
     def __enter__(self) -> Path:
-        self.folder.mkdir(parents=True, exist_ok=True)
-        remove_stale(self.folder)
-        shutil.rmtree(self.stage, ignore_errors=True)
-        self.stage.mkdir()
+        self.folder.absolute().parent.mkdir(parents=True, exist_ok=True)
+        self.folder = self.folder.resolve()
+        self.stage = sibling(self.folder, self._tag, "tmp")
+        with locked(self.folder.parent):
+            remove_stale(self.folder)      # first: a vacant folder may get a complete set
+            self.folder.mkdir(exist_ok=True)
+            reason = unswitchable(self.folder)
+            if reason:
+                raise CompanionError(f"{self.folder}: {reason}")
+            self.stage.mkdir(mode=0o777)
+        ACTIVE.add(self._tag)
         return self.stage
 
     def __exit__(self, kind, value, trace) -> None:
         if os.getpid() != self._pid:        # a forked worker leaving: not its outputs
             return
-        if kind is not None:
-            shutil.rmtree(self.stage, ignore_errors=True)
-            return
-        switch(self.folder, self.command, self.stage)
+        try:
+            if kind is not None:
+                shutil.rmtree(self.stage, ignore_errors=True)
+                return
+            with locked(self.folder.parent):
+                try:
+                    _complete(self.folder, self.command, self.stage)
+                except BaseException:
+                    shutil.rmtree(self.stage, ignore_errors=True)
+                    raise
+                switch(self.folder, self.stage, self._tag)
+        finally:
+            ACTIVE.discard(self._tag)
 
 
-#: Separates a command's name from its generation in the hidden folders of :class:`Outputs`.
-MARK = "@"
-CURRENT = "current"
-_OUR_LINK = re.compile(rf"\.[^/]+{MARK}{CURRENT}/[^/]+")
-
-
-def current_link(folder: Path, command: str) -> Path:
-    """The link that names the current generation of ``command``'s outputs in ``folder``."""
-    return folder / f".{command}{MARK}{CURRENT}"
-
-
-def switch(folder: Path, command: str, generation: Path) -> None:
-    """Make ``generation`` (a folder inside ``folder``) the current outputs of ``command``: link
-    each of its names, re-point the current link by one rename, then remove what the previous
-    generation had alone (see :class:`Outputs`)."""
-    link = current_link(folder, command)
-    previous = _generation(link)
-    old = set() if previous is None else {p.name for p in previous.iterdir()}
-    old |= _legacy_names(folder, command)
-    new = sorted(p.name for p in generation.iterdir())
-    for name in new:
-        _place_link(folder / name, f"{link.name}/{name}", folder, command)
-    tmp = folder / f".{command}{MARK}{os.getpid()}.link.tmp"
-    tmp.unlink(missing_ok=True)
-    os.symlink(generation.name, tmp)
-    os.replace(tmp, link)                    # the one step from the old set to the new one
-    for name in sorted(old - set(new)):
-        if _links_into(folder / name, link.name) or name in _legacy_names(folder, command):
-            _remove(folder / name)
-    (folder / f".{command}.outputs").unlink(missing_ok=True)
-    if previous is not None and previous.resolve() != generation.resolve():
-        shutil.rmtree(previous, ignore_errors=True)
-
-
-def _generation(link: Path) -> Path | None:
-    """The generation folder ``link`` points to, or None."""
-    if not link.is_symlink():
-        return None
-    target = link.parent / os.readlink(link)
-    return target if target.is_dir() else None
-
-
-def _links_into(path: Path, link_name: str) -> bool:
-    return path.is_symlink() and os.readlink(path).startswith(f"{link_name}/")
-
-
-def _legacy_names(folder: Path, command: str) -> set[str]:
-    """Names listed by the manifest of earlier versions (``.<command>.outputs``), whose
-    outputs were plain files."""
+@contextmanager
+def atomic_folder(path: str | Path) -> Iterator[Path]:
+    """A path to build a folder at (not made yet, of the same name as ``path``, in a hidden
+    folder beside it: a rosbag2 writer names its files after it), put at ``path`` whole when
+    the block ends normally, replacing what was there (:class:`Outputs`' switch); on an
+    exception it is removed and ``path`` left as it was."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path = path.parent.resolve() / path.name
+    Outputs._count += 1
+    tag = f"{os.getpid()}-{Outputs._count}"
+    tmp = sibling(path, tag, "tmp")
+    with locked(path.parent):
+        remove_stale(path)
+    ACTIVE.add(tag)
     try:
-        names = json.loads((folder / f".{command}.outputs").read_text(encoding="utf-8"))
+        tmp.mkdir()
+        yield tmp / path.name
+        (tmp / path.name).mkdir(exist_ok=True)
+        with locked(path.parent):
+            switch(path, tmp / path.name, tag)
+        os.rmdir(tmp)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    finally:
+        ACTIVE.discard(tag)
+
+
+def _complete(folder: Path, command: str, stage: Path) -> None:
+    """Make ``stage`` the whole new ``folder``: this command's manifest, and what of
+    ``folder`` is not its previous output carried over as hard links."""
+    manifest = f".{command}.outputs"
+    names = sorted(p.name for p in stage.iterdir() if p.name != manifest)
+    if folder.is_dir():
+        os.chmod(stage, stat.S_IMODE(folder.stat().st_mode))
+        old = _layout(folder)
+        previous = old.outputs.get(command, set()) | _manifest(folder / manifest)
+        for name, source in old.entries.items():
+            if name not in previous and name not in names and name != manifest:
+                _carry(source, stage / name)
+        for other, outputs in old.outputs.items():
+            if other != command and not (stage / f".{other}.outputs").exists():
+                write_text(stage / f".{other}.outputs", json.dumps(sorted(outputs)) + "\n")
+    write_text(stage / manifest, json.dumps(names) + "\n")
+
+
+class _Layout:
+    """What of a folder carries over (``entries``: name -> source) and the outputs of each
+    command that used the links of earlier versions (``outputs``)."""
+
+    def __init__(self) -> None:
+        self.entries: dict[str, Path] = {}
+        self.outputs: dict[str, set[str]] = {}
+
+
+_OUR_LINK = re.compile(r"\.(?P<command>[^/]+)@current/[^/]+")
+#: What earlier versions kept in an output folder besides the outputs (generations, current
+#: links, staging folders) and the temporary files of interrupted writes: not carried over.
+_EARLIER = re.compile(r"\..+@(current|\d+-\d+)|\.staging-.*|\..*\.tmp")
+
+
+def _layout(folder: Path) -> _Layout:
+    layout = _Layout()
+    for path in sorted(folder.iterdir()):
+        name = path.name
+        if _EARLIER.fullmatch(name):
+            continue               # earlier versions' generations and links; temporaries
+        if path.is_symlink():
+            match = _OUR_LINK.fullmatch(os.readlink(path))
+            if match:              # an output of an earlier version: a plain file now
+                if path.exists():
+                    layout.entries[name] = path.resolve()
+                    layout.outputs.setdefault(match["command"], set()).add(name)
+                continue
+        layout.entries[name] = path
+    return layout
+
+
+def _manifest(path: Path) -> set[str]:
+    """The names listed by a command's manifest (``.<command>.outputs``), if any."""
+    try:
+        names = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
+        return set()
+    if not isinstance(names, list):
         return set()
     return {n for n in names if isinstance(n, str) and "/" not in n and n not in ("", ".", "..")}
 
 
-def _place_link(path: Path, target: str, folder: Path, command: str) -> None:
-    """``path`` as a link to ``target`` (nothing to do if it is one already); a plain file or
-    folder in its place (an earlier version's output, or another command's) is replaced."""
-    if path.is_symlink() and os.readlink(path) == target:
-        return
-    if path.is_dir() and not path.is_symlink():
-        aside = folder / f".{command}{MARK}{os.getpid()}.old.tmp"
-        shutil.rmtree(aside, ignore_errors=True)
-        os.replace(path, aside)
-        shutil.rmtree(aside, ignore_errors=True)
-    tmp = folder / f".{path.name}.{os.getpid()}.link.tmp"
-    tmp.unlink(missing_ok=True)
-    os.symlink(target, tmp)
-    os.replace(tmp, path)
-
-
-def _remove(path: Path) -> None:
-    if path.is_dir() and not path.is_symlink():
-        shutil.rmtree(path, ignore_errors=True)
-    else:
-        path.unlink(missing_ok=True)
-
-
-def remove_stale(folder: Path) -> None:
-    """Remove what processes that no longer exist left in ``folder``: generations that never
-    became current, links to names their current generation lacks, temporary files, and the
-    staging folders of earlier versions."""
-    current = {p.resolve() for p in folder.glob(f".*{MARK}{CURRENT}") if p.is_symlink()}
-    for path in folder.glob(f".*{MARK}*"):
-        owner = path.name.rsplit(MARK, 1)[-1].split("-", 1)[0].split(".", 1)[0]
-        if path.name.endswith(f"{MARK}{CURRENT}") or not owner.isdigit():
-            continue
-        if not _alive(int(owner)) and path.resolve() not in current:
-            _remove(path)
-    for path in folder.iterdir():
-        if path.is_symlink() and not path.exists() and _OUR_LINK.fullmatch(os.readlink(path)):
-            path.unlink(missing_ok=True)      # into a current generation that lacks it
-    for path in [*folder.glob(".staging-*"), *folder.glob(".*.tmp")]:
-        _remove(path)
-
-
-def leftovers(folder: Path) -> list[str]:
-    """Hidden entries of ``folder`` other than the current links of :class:`Outputs` and their
-    generations (what an interrupted write leaves; none after a finished or failed one)."""
-    if not folder.is_dir():
-        return []
-    links = [p for p in folder.glob(f".*{MARK}{CURRENT}") if p.is_symlink()]
-    keep = {p.name for p in links} | {os.readlink(p) for p in links}
-    return sorted(p.name for p in folder.iterdir()
-                  if p.name.startswith(".") and p.name not in keep)
-
-
-def _alive(pid: int) -> bool:
-    if pid == os.getpid():
-        return False                          # an earlier run of this very process
+def _link(source: str | Path, target: str | Path) -> None:
+    """``target`` as a hard link of ``source``; a copy where the file system has none."""
     try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
+        os.link(source, target)
+    except OSError:
+        shutil.copy2(source, target)
+
+
+def _carry(source: Path, target: Path) -> None:
+    """``source`` (a file, folder or symbolic link) at ``target`` without copying data."""
+    if source.is_symlink():
+        os.symlink(os.readlink(source), target)
+    elif source.is_dir():
+        shutil.copytree(source, target, symlinks=True, copy_function=_link)
+    elif source.is_file():
+        _link(source, target)
+
+

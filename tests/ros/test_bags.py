@@ -177,9 +177,10 @@ def test_sigterm_mid_run_leaves_no_bag(tmp_path):
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
         end = time.monotonic() + 120
-        while time.monotonic() < end and not list(tmp_path.glob(".bag-bag@*/bag/*.mcap")):
+        staged = ".bag.companion-*.tmp/bag/*.mcap"          # in the hidden folder beside
+        while time.monotonic() < end and not list(tmp_path.glob(staged)):
             time.sleep(0.1)
-        assert list(tmp_path.glob(".bag-bag@*/bag/*.mcap")), "the run never started"
+        assert list(tmp_path.glob(staged)), "the run never started"
         time.sleep(0.5)
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(60) == 143
@@ -187,7 +188,7 @@ def test_sigterm_mid_run_leaves_no_bag(tmp_path):
         proc.kill()
         proc.wait()
     assert not (tmp_path / "bag").exists()
-    assert leftovers(tmp_path) == []
+    assert leftovers(tmp_path) == [] and leftovers(tmp_path / "bag") == []
     assert not (tmp_path / "o" / "log.csv").exists()
 
 
@@ -203,7 +204,21 @@ def test_a_second_recording_replaces_the_bag_whole(tmp_path, recorded):
         with Reader(path) as r:
             assert r.topics["/odom"].msgcount == round(seconds / 0.05)
     assert sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith(".")) == ["bag"]
-    assert leftovers(tmp_path) == []
+    assert leftovers(tmp_path) == [] and leftovers(path) == []
+    assert not path.is_symlink() and not any(p.is_symlink() for p in path.iterdir())
+
+
+def test_run_with_a_bag_names_the_bag_where_it_is(tmp_path, capsys, monkeypatch):
+    """The bag is a plain folder, and the last line gives it by its path from here."""
+    from companion.apps.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "line", "--duration", "1", "--out", "o", "--bag", "bags/b1"]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == \
+        "wrote o/log.csv, o/metrics.json, bags/b1/"
+    bag = tmp_path / "bags" / "b1"
+    assert (bag / "metadata.yaml").is_file() and not bag.is_symlink()
+    assert leftovers(bag) == [] and leftovers(tmp_path / "o") == []
 
 
 def test_config_mapping_round_trips(recorded):

@@ -314,11 +314,11 @@ def save(path: str | Path, runs: Mapping[str, Log], sc: Scenario, title: str = "
     return len(rows)
 
 
-def save_run(target: Path, out: Path, stage: Path, sc: Scenario, log: Log) -> str:
+def save_run(target: Path, out: Path, stage: Path, sc: Scenario, log: Log) -> bool:
     """``companion run --animate``: into the staging folder ``stage`` (so it is replaced with
     the other outputs) when ``target`` is directly in the output folder ``out``, else
-    straight to ``target``; returns the name to report."""
+    straight to ``target``; returns whether it is one of the outputs in ``out``."""
     inside = target.absolute().parent.resolve() == out.absolute().resolve()
     save(stage / target.name if inside else target, {sc.controller: log}, sc,
          f"{sc.name} / {sc.controller}")
-    return target.name if inside else str(target)
+    return inside

@@ -9,7 +9,7 @@ import argparse
 import dataclasses
 import os
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from companion.apps.flags import FLAGS
@@ -20,6 +20,7 @@ from companion.geometry import wrap_2pi
 from companion.params import Params, SensingParams, load_sensing, params_from_mapping
 from companion.sim.recorded import load_person_csv
 from companion.sim.scenario import Scenario, load_scenario
+from companion.swap import unswitchable
 from companion.types import Pose
 
 
@@ -170,9 +171,10 @@ def build_scenario(args: argparse.Namespace) -> Scenario:
     return dataclasses.replace(sc, **changes)
 
 
-def output_dir(path: Path) -> Path:
+def output_dir(path: Path, replaced: bool = True) -> Path:
     """Check (before any work) that ``path`` can be an output folder; the outputs go into it
-    all together at the end (:class:`~companion.io.Outputs`)."""
+    all together at the end, by replacing it (:class:`~companion.io.Outputs`; ``replaced``
+    False: a folder that only gets new entries)."""
     if path.exists() and not path.is_dir():
         raise UsageError(f"--out {path}: exists and is not a folder")
     try:
@@ -181,7 +183,29 @@ def output_dir(path: Path) -> Path:
         raise UsageError(f"--out {path}: cannot write there ({exc.strerror})") from None
     if not os.access(path, os.W_OK | os.X_OK):
         raise UsageError(f"--out {path}: cannot write there (permission denied)")
+    reason = unswitchable(path) if replaced else None
+    if reason:
+        raise UsageError(f"--out {path}: {reason}")
     return path
+
+
+def shown(path: str | Path) -> str:
+    """``path`` as the user can open it from the current folder: relative to it, or absolute
+    where that would climb out more than one level; a folder ends with ``/``."""
+    full = Path(path).absolute()
+    try:
+        text = os.path.relpath(full)
+    except ValueError:                          # another drive
+        text = str(full)
+    if Path(text).parts.count("..") > 1:
+        text = str(full)
+    return text + os.sep if full.is_dir() else text
+
+
+def wrote(paths: Iterable[str | Path], rest: str = "") -> str:
+    """A command's last line: every file or folder it wrote, by :func:`shown`, then
+    ``rest`` (for example ``"and the figures in out/x"``)."""
+    return f"wrote {', '.join(shown(p) for p in paths)}{' ' + rest if rest else ''}"
 
 
 def output_file(text: str, flag: str = "--out") -> Path:

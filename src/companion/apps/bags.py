@@ -1,14 +1,13 @@
 """``--bag DIR`` of ``companion run``, ``sim-robot`` and ``node``: the folder checked first, the
-bag staged and moved into place whole (docs/recording.md)."""
+bag built beside it and put into place whole (docs/recording.md)."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager, nullcontext
+from contextlib import nullcontext
 from pathlib import Path
 
 from companion.apps.args import UsageError, output_dir
-from companion.io import Outputs
+from companion.io import atomic_folder, unswitchable
 
 
 def bag_arg(value: str | None) -> Path | None:
@@ -20,21 +19,18 @@ def bag_arg(value: str | None) -> Path | None:
     if path.exists() and not (path.is_dir() and (path / "metadata.yaml").exists()):
         raise UsageError(f"--bag {path}: exists and is not a rosbag2 bag (no metadata.yaml); "
                          f"give a new folder")
-    output_dir(path.parent if str(path.parent) else Path("."))
+    output_dir(path.parent if str(path.parent) else Path("."), replaced=False)
+    reason = unswitchable(path) if path.exists() else None
+    if reason:
+        raise UsageError(f"--bag {path}: {reason}")
     return path
 
 
 def bag_outputs(path: Path | None):
-    """A context giving the staging path to write the bag at (None without ``--bag``); the
-    bag appears at ``path`` only when the block ends normally."""
-    if path is None:
-        return nullcontext(None)
-
-    @contextmanager
-    def staged() -> Iterator[Path]:
-        with Outputs(path.parent, f"bag-{path.name}") as stage:
-            yield stage / path.name
-    return staged()
+    """A context giving the path beside ``path`` to write the bag at (None without
+    ``--bag``); the bag, a plain folder, appears at ``path`` only when the block ends
+    normally (:func:`~companion.io.atomic_folder`)."""
+    return nullcontext(None) if path is None else atomic_folder(path)
 
 
 def run_recorded(sc, bag: Path):

@@ -27,7 +27,9 @@ from companion.apps.args import (
     output_file,
     params_arg,
     seed_arg,
+    shown,
     workers_arg,
+    wrote,
 )
 from companion.apps.logfile import LogCsv, Thinned, write_log
 from companion.apps.progress import progress_bar
@@ -119,10 +121,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     checked_controllers([sc.controller], sc.params, args.params or sc.source)
     out = output_dir(Path(args.out or Path("out") / sc.name))
     target = movie.target_arg(args.animate) if args.animate else None
+    elsewhere: list[Path] = []
     if args.bag:                            # the episode runs over the recorded graph
         from companion.apps.bags import bag_arg, run_recorded
 
-        blocks = iter([run_recorded(sc, bag_arg(args.bag))])
+        bag = bag_arg(args.bag)
+        blocks = iter([run_recorded(sc, bag)])
+        elsewhere.append(bag)
     else:
         blocks = started(stream_one(sc.episode()))
     with Outputs(out, "run") as stage:      # the log goes to disk as the episode runs
@@ -131,14 +136,17 @@ def cmd_run(args: argparse.Namespace) -> int:
         else:                               # an animation needs the whole log at the end
             log = Log.concat(blocks)
             m, written = _write_run(stage, sc, args.plot, [log])
-            written.append(animate.save_run(target, out, stage, sc, log))
+            if animate.save_run(target, out, stage, sc, log):
+                written.append(target.name)
+            else:
+                elsewhere.append(target)
     # Everything is written before anything is printed: a reader that goes away early
     # (| head) cannot cut the outputs short.
     print(f"{sc.name}: {sc.description}")
     print(f"controller {sc.controller}, {sc.duration:g} s, seed {sc.seed}, side bearing "
           f"{sc.params.formation.bearing:.4f} rad, distance {sc.params.formation.distance:g} m")
     print("\n".join(summary_lines(m)))
-    print(f"wrote {', '.join(written)} in {out}")
+    print(wrote([*(out / name for name in written), *elsewhere]))
     return 0
 
 
@@ -182,7 +190,7 @@ def cmd_soak(args: argparse.Namespace) -> int:
         and result["obstacle_collisions"] == 0
     print("PASS: no collision with the person or an obstacle, all values finite" if ok
           else "FAIL: a collision or a non-finite value")
-    print(f"wrote {', '.join(written)} in {out}")
+    print(wrote(out / name for name in written))
     return 0 if ok else 1
 
 
@@ -201,7 +209,7 @@ def cmd_fuzz(args: argparse.Namespace) -> int:
             write_log(stage / "log.csv", log)
             write_json(stage / "episode.json", {"case": vars(case), "counts": counts})
         print(json.dumps({"case": vars(case), "counts": counts}, indent=1))
-        print(f"wrote log.csv, episode.json in {out}")
+        print(wrote([out / "log.csv", out / "episode.json"]))
         return 1 if sim_fuzz.robot_failed(counts) else 0
     steps = int_arg(args.steps, "--steps", "N")
     seed = seed_arg(args.seed)
@@ -240,7 +248,7 @@ def cmd_fuzz(args: argparse.Namespace) -> int:
     if missed and not robot:
         print("no failure found, but the run is too short to bound the rate: that needs 299 "
               "episodes per sensing profile without one (about 1,000,000 steps)")
-    print(f"wrote fuzz.json, fuzz.csv in {out}")
+    print(wrote([out / "fuzz.json", out / "fuzz.csv"]))
     return 1 if robot else 0
 
 
@@ -262,8 +270,9 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     print("Table 3 (em-tracker and realistic sensing, mean over seeds; the paper's LQR on the "
           "real robot at the right of ours under em-tracker):")
     print(table3.text(result.table3))
-    print(f"wrote table2.csv, table2.md, table3.csv, table3.md, fig3.csv, fig4.csv, the "
-          f"Fig. 3, 4, 7 PNGs and fig4.gif in {out}")
+    print(wrote([out / name for name in ("table2.csv", "table2.md", "table3.csv", "table3.md",
+                                          "fig3.csv", "fig4.csv", "fig4.gif")],
+                f"and the Fig. 3, 4, 7 PNGs in {shown(out)}"))
     return 0
 
 

@@ -15,7 +15,15 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from companion.apps.args import UsageError, int_arg, output_dir, seed_arg, workers_arg
+from companion.apps.args import (
+    UsageError,
+    int_arg,
+    output_dir,
+    seed_arg,
+    shown,
+    workers_arg,
+    wrote,
+)
 from companion.apps.progress import progress_bar
 from companion.evaluate.report import write_episodes, write_summary
 from companion.evaluate.rows import failed
@@ -32,8 +40,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     out = output_dir(Path(args.out or Path("out") / f"evaluate-{name}"))
     rows = evaluate(suite, out, workers_arg(args), args.dask)
     print((out / "summary.md").read_text(encoding="utf-8"))
-    print(f"wrote episodes.csv, summary.json, summary.md and the figures in {out}")
+    print(wrote(suite_outputs(out), f"and the figures in {shown(out)}"))
     return 1 if failures(suite, rows) else 0
+
+
+def suite_outputs(out: Path) -> list[Path]:
+    """The files every suite command writes in ``out`` besides its figures."""
+    return [out / name for name in ("episodes.csv", "summary.json", "summary.md")]
 
 
 def evaluate(suite: Suite, out: Path, workers: int | None, dask: str | None = None,
@@ -113,7 +126,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
           f"({tuned.trials} trials)")
     for dim, value in zip(tuned.dims, tuned.best):
         print(f"  {dim.name} = {value:.4g}")
-    print(f"wrote best.toml and trials.csv in {out}")
+    print(wrote([out / "best.toml", out / "trials.csv"]))
     return 0
 
 

@@ -21,6 +21,7 @@ from companion.apps.args import (
     number_arg,
     output_dir,
     with_sensing,
+    wrote,
 )
 from companion.apps.bags import bag_arg, bag_outputs
 from companion.io import Outputs, write_json
@@ -104,7 +105,10 @@ def cmd_node(args: argparse.Namespace) -> int:
     source = "--domain-id" if args.domain_id is not None else \
         f"ros.domain_id in {args.params}" if config.ros.domain_id is not None else ""
     with bag_outputs(bag) as staged:
-        return _node(config, staged, limit, source)
+        code = _node(config, staged, limit, source)
+    if bag is not None:
+        print(wrote([bag]), flush=True)
+    return code
 
 
 def _node(config, staged: Path | None, limit: float | None, domain_source: str) -> int:
@@ -222,7 +226,7 @@ def cmd_sim_robot(args: argparse.Namespace) -> int:
                                                           "commands_received": robot.commands})
     print(f"companion sim-robot: {robot.commands} commands received in {len(log)} periods")
     print("\n".join(summary_lines(m)))
-    print(f"wrote {', '.join(written)} in {out}")
+    print(wrote([*(out / name for name in written), *([bag] if bag is not None else [])]))
     return 0 if robot.commands else 1
 
 
@@ -272,5 +276,5 @@ def cmd_replay(args: argparse.Namespace) -> int:
               f"{num(m['cmd_diff_v_mps_rms'])} m/s (max {num(m['cmd_diff_v_mps_max'])}), "
               f"omega RMS {num(m['cmd_diff_omega_radps_rms'])} rad/s "
               f"(max {num(m['cmd_diff_omega_radps_max'])})")
-    print(f"wrote bag/, metrics.json in {out}")
+    print(wrote([out / "bag", out / "metrics.json"]))
     return 0

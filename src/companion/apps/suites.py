@@ -18,9 +18,11 @@ from companion.apps.args import (
     output_dir,
     params_arg,
     ranged,
+    shown,
     workers_arg,
+    wrote,
 )
-from companion.apps.evaluation import evaluate, failures
+from companion.apps.evaluation import evaluate, failures, suite_outputs
 from companion.config import load_toml
 from companion.control import CONTROLLERS
 from companion.data import pedestrians
@@ -69,7 +71,7 @@ def cmd_pedestrians(args: argparse.Namespace) -> int:
     suite = suite_from_mapping(data, Path("<companion pedestrians>"))
     rows = evaluate(suite, out, workers, args.dask)
     print(walkers_text(walkers.table(rows), walkers.paired(rows, controllers[0])))
-    print(f"wrote episodes.csv, summary.json, summary.md and the figures in {out}\n")
+    print(wrote(suite_outputs(out), f"and the figures in {shown(out)}") + "\n")
     print(pedestrians.CREDIT)
     return 0
 
@@ -143,6 +145,6 @@ def cmd_convergence(args: argparse.Namespace) -> int:
               + (f"  FAIL: {', '.join(failed[r['episode']])}" if r["episode"] in failed else ""))
     met = " and ".join(map(str, suite.criteria))
     print(f"{len(rows) - len(failed)}/{len(rows)} runs meet {met}")
-    print(f"wrote episodes.csv, summary.json, summary.md{' and the Fig. 3 PNGs' * args.plot} "
-          f"in {out}")
+    print(wrote(suite_outputs(out), f"and the figures{' and the Fig. 3 PNGs' * args.plot} in "
+                                    f"{shown(out)}"))
     return 0 if not failed else 1
