@@ -31,8 +31,7 @@ SIDES = ("behind", "front", "left", "right")
 
 
 class OneLineParser(argparse.ArgumentParser):
-    """argparse, but usage errors are one line on stderr (exit code 2) naming the command,
-    with a "did you mean" for a misspelt command, choice or flag."""
+    """argparse, but usage errors are one line on stderr (exit code 2) naming the command."""
 
     def error(self, message: str) -> None:  # type: ignore[override]
         command = self.prog.removeprefix("companion").strip()
@@ -42,9 +41,8 @@ class OneLineParser(argparse.ArgumentParser):
 
 
 def suggestion(parser: argparse.ArgumentParser, message: str) -> str:
-    """The "; did you mean" suffix for argparse's ``message`` from ``parser``: the closest
-    choice to an invalid one, or the closest flag (of ``parser`` and its commands) to an
-    unrecognized one."""
+    """The "; did you mean" suffix for argparse's ``message``: the closest choice to an
+    invalid one, or flag (of ``parser`` and its commands) to an unrecognized one."""
     choice = re.search(r"invalid choice: '(.*?)' \(choose from (.*)\)$", message)
     if choice:
         return hint(choice[1], re.findall(r"'([^']*)'", choice[2]))
