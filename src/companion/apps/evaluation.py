@@ -60,10 +60,9 @@ def evaluate(suite: Suite, out: Path, workers: int | None, dask: str | None = No
           f"reference {suite.reference}) on "
           f"{'local worker processes' if dask is None else 'Dask ' + dask}")
     if rows is None:
-        total, partial = len(suite.episodes), out / PARTIAL
-        if kept_count(suite, out):
-            print(f"resuming: {kept_count(suite, out)} of {total} episodes kept in {partial}",
-                  flush=True)
+        total, partial, kept = len(suite.episodes), out / PARTIAL, kept_count(suite, out)
+        if kept:
+            print(f"resuming: {kept} of {total} episodes kept in {partial}", flush=True)
         try:
             with progress_bar(total, "episode") as bar:
                 rows = run_suite(suite, out, workers, dask, lambda done, total: bar(done))
