@@ -147,3 +147,33 @@ def test_trusting_wrong_rates_let_the_robot_inside(name):
     """The same loop with the reports trusted (gate inf): the LQR came to 0.48 m, the PID
     to 0.39 m, inside the protective distance."""
     assert closest_approach(name, math.inf) < P.keepout.protective_distance
+
+
+def test_exact_detections_with_wrong_rates_are_checked_too():
+    """A ROS Odometry /person with zero covariances is an exact detection: a person walking
+    at 0.6 m/s reported at 3 m/s, turning at 2 pi rad/s and heading elsewhere. Trusted, the
+    LQR came to 0.08 m of the person; checked, it keeps 1.06 m."""
+    heading, walk = 2.1408, 0.6
+    params = P.replace(formation=dataclasses.replace(P.formation, bearing=4.4914))
+    closest = {}
+    for gate in (P.tracker.motion_gate_chi2, math.inf):
+        p = params.replace(tracker=dataclasses.replace(P.tracker, motion_gate_chi2=gate))
+        stack = make_controller("lqr", p)
+        person = lambda t: PersonState(walk * t * math.cos(heading),  # noqa: E731
+                                       walk * t * math.sin(heading), heading, walk, 0.0)
+        start = start_in_slot(person(0.0), p)
+        x, y, th, va, wa = start.x, start.y, start.theta, 0.0, 0.0
+        stack.applied(Command(0.0, 0.0))
+        closest[gate] = math.inf
+        for k in range(200):
+            t = k * p.dt
+            h = person(t)
+            seen = PersonDetection(t, h.x, h.y, covariance=(0.0, 0.0, 0.0, 0.0),
+                                   heading=-1.5545, heading_std=0.0, speed=3.0,
+                                   turn_rate=2 * math.pi, velocity_std=(0.0, 0.0))
+            cmd = stack.step(Observation(t, Pose(x, y, wrap_pi(th)), detections=(seen,),
+                                         robot_velocity=(va, wa)))
+            x, y, th, va, wa = base_step(x, y, th, va, wa, cmd.v, cmd.omega, 0.0, p.dt)
+            closest[gate] = min(closest[gate], math.hypot(x - h.x, y - h.y))
+    assert closest[P.tracker.motion_gate_chi2] > 1.0, closest
+    assert closest[math.inf] < 0.2, closest
