@@ -31,7 +31,6 @@ from companion.tracking.motion import (
     Motion,
     motion_nis,
     motion_of,
-    reports_motion,
     without_motion,
 )
 from companion.tracking.walker import (
@@ -72,8 +71,8 @@ class _Posterior:
     belief: Belief
     inflation: float = 1.0     # the widening of the reported position covariance
     noise_scale: float = 1.0   # the learned factor on the detections' position variance
-    trusted: bool = True       # the detection's reported motion was used
-    motion: Motion | None = None   # what the detection brings to the motion check
+    trusted: bool = True               # the detection's reported motion was used
+    motion: Motion | None = None       # what it brings to the motion check (.motion)
 
 
 class PersonTracker:
@@ -185,25 +184,27 @@ class PersonTracker:
         self._history = before
         prior = self._predicted(before[-1], t)
         best = self._best(before[-1], prior, group)
-        if best is None and not self._motion_agrees(   # a wrong velocity carried it off?
-                min(group, key=lambda d: math.hypot(d.x - prior.x[0], d.y - prior.x[1]))):
-            self._without_motion()
-            prior = self._predicted(self._history[-1], t)
-            best = self._best(self._history[-1], prior, group)
+        if best is None:                      # did a wrong velocity carry the prior off?
+            nearest = min(group, key=lambda d: math.hypot(d.x - prior.x[0], d.y - prior.x[1]))
+            if not self._motion_agrees(motion_of(nearest, self.params)):
+                self._without_motion()
+                prior = self._predicted(self._history[-1], t)
+                best = self._best(self._history[-1], prior, group)
         if best is None:                      # a lone jump: a glitch as likely as someone
             reasons.append("person_outlier")
             self._history += later
             return
         self.others += [d for d in group if d is not best]
-        trusted = self._motion_agrees(best)
+        motion = motion_of(best, self.params)
+        trusted = self._motion_agrees(motion)
         if not trusted:
             reasons.append("person_motion_inconsistent")
             self._without_motion()
             prior = self._predicted(self._history[-1], t)
-        self._apply(best, prior, trusted=trusted)
+        self._apply(best, prior, trusted=trusted, motion=motion)
         for h in later:                       # re-filter what came after a late detection
             self._apply(h.detection, self._predicted(self._history[-1], h.t), again=True,
-                        trusted=h.trusted and trusted)
+                        trusted=h.trusted and trusted, motion=h.motion)
         horizon = self._history[-1].t - self.params.max_delay_s
         self._history = [h for h in self._history if h.t >= horizon] or self._history[-1:]
 
@@ -229,7 +230,7 @@ class PersonTracker:
         return self._filter.predict(base.belief, t - base.t)
 
     def _apply(self, d: PersonDetection, prior: Belief, again: bool = False,
-               trusted: bool = True) -> None:
+               trusted: bool = True, motion: Motion | None = None) -> None:
         """Append the ``prior`` updated with ``d`` (not ``trusted``: its position only;
         ``again``: re-filtered after a late detection, its NIS already reported)."""
         last = self._history[-1]
@@ -241,19 +242,18 @@ class PersonTracker:
         self._history.append(_Posterior(d.t, d, self._filter.update(prior, used, scale),
                                         self._inflation(last, d, nis),
                                         self._adapted(last, prior, d), trusted,
-                                        motion_of(d, self.params)))
+                                        motion or motion_of(d, self.params)))
 
-    def _motion_agrees(self, d: PersonDetection) -> bool:
-        """The velocities reported by the kept detections and ``d`` agree with their
-        positions (:mod:`.motion`); a ``d`` that reports none is not judged."""
+    def _motion_agrees(self, m: Motion) -> bool:
+        """The reports of the kept detections and ``m`` agree with their positions (.motion)."""
         p = self.params
-        window = [h.motion for h in self._history[1 - MAX_DETECTIONS:]] + [motion_of(d, p)]
-        return not reports_motion(d) \
+        window = [h.motion for h in self._history[1 - MAX_DETECTIONS:]] + [m]
+        return not m.reported \
             or motion_nis(window, p.motion_floor_mps, self.noise_scale) <= p.motion_gate_chi2
 
     def _without_motion(self) -> None:
         """Re-filter the kept detections for their positions alone (their reports are wrong)."""
-        if not any(h.trusted and reports_motion(h.detection) for h in self._history):
+        if not any(h.trusted and h.motion.reported for h in self._history):
             return
         kept = self._history
         self._history = [dataclasses.replace(self._start(without_motion(kept[0].detection)),
@@ -261,7 +261,7 @@ class PersonTracker:
                                              motion=kept[0].motion)]
         for h in kept[1:]:
             self._apply(h.detection, self._predicted(self._history[-1], h.t), again=True,
-                        trusted=False)
+                        trusted=False, motion=h.motion)
 
     def _inflation(self, last: _Posterior, d: PersonDetection, nis: float) -> float:
         """How much wider than the filter's the reported position covariance is after ``d``:
