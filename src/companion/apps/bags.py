@@ -3,6 +3,7 @@ bag built beside it and put into place whole (docs/recording.md)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from contextlib import nullcontext
 from pathlib import Path
 
@@ -33,8 +34,9 @@ def bag_outputs(path: Path | None):
     return nullcontext(None) if path is None else atomic_folder(path)
 
 
-def run_recorded(sc, bag: Path):
-    """``companion run --bag``: the scenario's run recorded as a bag (docs/recording.md)."""
+def run_recorded(sc, bag: Path, reached: Callable[[float], None] | None = None):
+    """``companion run --bag``: the scenario's run recorded as a bag (docs/recording.md);
+    ``reached(t)`` as the run goes."""
     from companion.ros.record import record_run, run_config
 
     spec = sc.episode()
@@ -42,4 +44,7 @@ def run_recorded(sc, bag: Path):
         print("note: with --bag the controller sees the obstacles through the simulated LiDAR "
               "(as the ROS 2 node does)", flush=True)
     with bag_outputs(bag) as staged:
-        return record_run(spec, run_config(spec, sc.controller), staged)
+        log = record_run(spec, run_config(spec, sc.controller), staged, reached)
+    if reached is not None:
+        reached(spec.duration)
+    return log

@@ -32,7 +32,7 @@ from companion.apps.args import (
     wrote,
 )
 from companion.apps.logfile import LogCsv, Thinned, write_log
-from companion.apps.progress import progress_bar
+from companion.apps.progress import progress_bar, seconds_bar
 from companion.control import lookup
 from companion.evaluate import fuzz_runs
 from companion.evaluate.generators import soak_suite
@@ -41,7 +41,7 @@ from companion.io import Outputs, save_figure, write_csv, write_json
 from companion.params import Params
 from companion.sim import fuzz as sim_fuzz
 from companion.sim import soak
-from companion.sim.runner import stream_one
+from companion.sim.runner import reporting, stream_one
 from companion.sim.scenario import builtin_names, load_scenario
 from companion.types import Log
 
@@ -122,24 +122,25 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = output_dir(Path(args.out or Path("out") / sc.name))
     target = movie.target_arg(args.animate) if args.animate else None
     elsewhere: list[Path] = []
-    if args.bag:                            # the episode runs over the recorded graph
-        from companion.apps.bags import bag_arg, run_recorded
+    with seconds_bar(sc.duration) as reached, reporting(reached):
+        if args.bag:                        # the episode runs over the recorded graph
+            from companion.apps.bags import bag_arg, run_recorded
 
-        bag = bag_arg(args.bag)
-        blocks = iter([run_recorded(sc, bag)])
-        elsewhere.append(bag)
-    else:
-        blocks = started(stream_one(sc.episode()))
-    with Outputs(out, "run") as stage:      # the log goes to disk as the episode runs
-        if target is None:
-            m, written = _write_run(stage, sc, args.plot, blocks)
-        else:                               # an animation needs the whole log at the end
-            log = Log.concat(blocks)
-            m, written = _write_run(stage, sc, args.plot, [log])
-            if animate.save_run(target, out, stage, sc, log):
-                written.append(target.name)
-            else:
-                elsewhere.append(target)
+            bag = bag_arg(args.bag)
+            blocks = iter([run_recorded(sc, bag, reached)])
+            elsewhere.append(bag)
+        else:
+            blocks = started(stream_one(sc.episode()))
+        with Outputs(out, "run") as stage:  # the log goes to disk as the episode runs
+            if target is None:
+                m, written = _write_run(stage, sc, args.plot, blocks)
+            else:                           # an animation needs the whole log at the end
+                log = Log.concat(blocks)
+                m, written = _write_run(stage, sc, args.plot, [log])
+                if animate.save_run(target, out, stage, sc, log):
+                    written.append(target.name)
+                else:
+                    elsewhere.append(target)
     # Everything is written before anything is printed: a reader that goes away early
     # (| head) cannot cut the outputs short.
     print(f"{sc.name}: {sc.description}")
@@ -174,9 +175,9 @@ def cmd_soak(args: argparse.Namespace) -> int:
     suite = soak_suite(duration, seed, args.controller, params)
     # with --log the episode runs here, its log going to disk as it runs; else through the
     # engine, kept in --out once run (as evaluate keeps its episodes)
-    blocks = started(stream_one(suite.episodes[0].spec)) if args.log else None
-    with Outputs(out, "soak") as stage:
-        if blocks is not None:
+    with seconds_bar(duration) as reached, reporting(reached), Outputs(out, "soak") as stage:
+        if args.log:
+            blocks = started(stream_one(suite.episodes[0].spec))
             with LogCsv(stage / "log.csv") as csv:
                 result = soak.summarize_blocks(blocks, params, csv.log)
         else:

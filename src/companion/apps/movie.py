@@ -5,7 +5,7 @@ MP4, both through :mod:`matplotlib.animation`'s writers)."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from matplotlib import animation
@@ -13,6 +13,7 @@ from matplotlib.figure import Figure
 from PIL import Image
 
 from companion.apps.args import UsageError, output_file
+from companion.apps.progress import counted
 from companion.io import atomic_write
 
 EXTENSIONS = (".gif", ".mp4")
@@ -88,15 +89,16 @@ class _Mp4Writer(animation.FFMpegWriter):
         self._proc.stdin.write(self.fig.canvas.buffer_rgba())
 
 
-def write(path: Path, fig: Figure, render: Callable[[int], None], rows: Iterable[int],
+def write(path: Path, fig: Figure, render: Callable[[int], None], rows: Sequence[int],
           fps: int) -> None:
     """Write ``path`` (.gif or .mp4) atomically: for each of ``rows``, ``render(row)`` draws
-    the frame on ``fig``'s canvas, and the frame is taken from there."""
+    the frame on ``fig``'s canvas, and the frame is taken from there (a bar of the frames on
+    stderr when it takes long)."""
     writer = _Mp4Writer(fps) if path.suffix.lower() == ".mp4" else _GifWriter(fps=fps)
 
     def frames(tmp: Path) -> None:
         with writer.saving(fig, str(tmp), dpi=fig.dpi):
-            for k in rows:
+            for k in counted(rows, len(rows), "frame", f"drawing {path.name}"):
                 render(int(k))
                 writer.grab_frame()
 

@@ -24,6 +24,7 @@ from companion.apps.args import (
     wrote,
 )
 from companion.apps.bags import bag_arg, bag_outputs
+from companion.apps.progress import sized_bar
 from companion.io import Outputs, write_json
 
 
@@ -259,8 +260,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(f"replay: {note}", flush=True)
     config = topics_arg(config, args.topics)
     out = output_dir(Path(args.out or Path("out") / f"replay-{bag.name}"))
-    with Outputs(out, "replay") as stage:
-        m = replay(bag, config, stage / "bag")
+    with Outputs(out, "replay") as stage, sized_bar("tick", "replaying") as progress:
+        m = replay(bag, config, stage / "bag", progress)
         m["bag"] = str(bag)
         write_json(stage / "metrics.json", m)
 

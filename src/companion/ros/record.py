@@ -53,10 +53,11 @@ def on_clock(t: float) -> float:
     return convert.seconds(convert.time_msg(t))
 
 
-def record_run(spec: EpisodeSpec, config: NodeConfig, bag_path: Path) -> Log:
+def record_run(spec: EpisodeSpec, config: NodeConfig, bag_path: Path,
+               reached: Callable[[float], None] | None = None) -> Log:
     """Run ``spec`` with the node of ``config`` and the simulated robot ticked in lock-step
     (the node right after each sample's messages) and record every message, plus the scene,
-    in a bag at ``bag_path``; returns the log."""
+    in a bag at ``bag_path``; returns the log. ``reached(t)`` after each tick (progress)."""
     r, p = config.ros, spec.params
     bag = open_bag(bag_path, config)
     try:
@@ -71,6 +72,8 @@ def record_run(spec: EpisodeSpec, config: NodeConfig, bag_path: Path) -> Log:
                                   v.obstacles, node.time)
             if update is not None:
                 bus.record(SCENE_TOPIC, SCENE_TYPE, update)
+            if reached is not None:
+                reached(t)
 
         log, _ = run_sim_robot(spec, MemoryTransport(bus, bag.typestore), r, Pacer(0.0),
                                after=tick)

@@ -16,7 +16,7 @@ from __future__ import annotations
 import json
 import math
 from collections import defaultdict
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -179,9 +179,10 @@ def _ticks(reader: BagReader, config: NodeConfig, inputs: list[Any]) -> list[int
     return list(range(first, last + 1, dt))
 
 
-def replay(bag: Path, config: NodeConfig, out_bag: Path) -> dict[str, Any]:
+def replay(bag: Path, config: NodeConfig, out_bag: Path,
+           progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
     """Replay ``bag`` through the node of ``config`` into a new bag at ``out_bag``; returns
-    the metrics (docs/recording.md)."""
+    the metrics (docs/recording.md). ``progress(done, total)`` counts the node's ticks."""
     reader = BagReader(bag)
     r = config.ros
     try:
@@ -197,7 +198,7 @@ def replay(bag: Path, config: NodeConfig, out_bag: Path) -> dict[str, Any]:
         out = open_bag(out_bag, config)
         reader.typestore = out.typestore
         try:
-            return _run(reader, config, inputs, recorded, out)
+            return _run(reader, config, inputs, recorded, out, progress)
         finally:
             out.close()
     finally:
@@ -205,7 +206,7 @@ def replay(bag: Path, config: NodeConfig, out_bag: Path) -> dict[str, Any]:
 
 
 def _run(reader: BagReader, config: NodeConfig, inputs: list[Any], recorded: Any,
-         out: BagWriter) -> dict[str, Any]:
+         out: BagWriter, progress: Callable[[int, int], None] | None) -> dict[str, Any]:
     r, p = config.ros, config.params
     for c in inputs:
         if c.msgcount == 0:
@@ -236,6 +237,8 @@ def _run(reader: BagReader, config: NodeConfig, inputs: list[Any], recorded: Any
                                    p.robot.d)
             rows.append((ticks[k], cmd.v, cmd.omega, *e))
             k += 1
+            if progress is not None:
+                progress(k, len(ticks))
 
     streams = inputs + ([recorded] if recorded is not None else [])
     for c, log_ns, msg in reader.records(streams):

@@ -19,6 +19,8 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
@@ -57,14 +59,42 @@ def run_one(spec: EpisodeSpec) -> Log:
     return Log.concat(stream_one(spec))
 
 
+#: The callback of :func:`reporting` in this context (None: nobody is watching).
+_watcher: ContextVar[Callable[[float], None] | None] = ContextVar("watcher", default=None)
+
+
+@contextmanager
+def reporting(callback: Callable[[float], None]) -> Iterator[None]:
+    """Inside, every episode streamed in this process (:func:`stream_one`, so also
+    :func:`run_one` and a suite run with one worker) calls ``callback(t)`` with the simulated
+    time it reached after each block: a command's progress bar. Worker processes do not
+    report."""
+    token = _watcher.set(callback)
+    try:
+        yield
+    finally:
+        _watcher.reset(token)
+
+
 def stream_one(spec: EpisodeSpec, rows: int = BLOCK_ROWS) -> Iterator[Log]:
     """:func:`run_one`'s log in blocks of ``rows`` rows, yielded as the episode runs
     (:func:`companion.sim.episode.episode_blocks`): a long episode in bounded memory."""
-    return episode_blocks(make_controller(spec.controller, spec.params), spec.person,
-                          spec.params, spec.duration, start=spec.start, seed=spec.seed,
-                          obstacles=spec.obstacles,
-                          perception=make_perception(spec.obstacle_source, spec.params),
-                          faults=spec.faults, start_velocity=spec.start_velocity, rows=rows)
+    blocks = episode_blocks(make_controller(spec.controller, spec.params), spec.person,
+                            spec.params, spec.duration, start=spec.start, seed=spec.seed,
+                            obstacles=spec.obstacles,
+                            perception=make_perception(spec.obstacle_source, spec.params),
+                            faults=spec.faults, start_velocity=spec.start_velocity, rows=rows)
+    watcher = _watcher.get()
+    return blocks if watcher is None else _watched(blocks, watcher, spec.duration)
+
+
+def _watched(blocks: Iterator[Log], watcher: Callable[[float], None], duration: float
+             ) -> Iterator[Log]:
+    for block in blocks:
+        if len(block["t"]):
+            watcher(float(block["t"][-1]))
+        yield block
+    watcher(duration)                   # the episode is over
 
 
 def default_workers() -> int:
