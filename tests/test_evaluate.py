@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from companion.apps.args import shown
 from companion.apps.cli import main
 from companion.errors import ConfigError
 from companion.evaluate import stats
@@ -373,8 +374,8 @@ def test_an_interrupted_evaluate_says_what_it_kept_and_the_next_run_resumes(
     monkeypatch.setattr(engine, "_backend", interrupted)
     assert main(args) == 130
     err = capsys.readouterr().err
-    assert f"tiny: stopped with 3 of 8 episodes kept in {out / '.evaluate.partial'}; the same " \
-           "command continues from them" in err
+    assert f"tiny: stopped; 3 of 8 episodes kept in {shown(out / '.evaluate.partial')}: the " \
+           "same command continues from them" in err
     monkeypatch.setattr(engine, "_backend", real)
     assert main(args) == 0
     assert f"resuming: 3 of 8 episodes kept in {out / '.evaluate.partial'}" \

@@ -6,6 +6,7 @@ import dataclasses
 import pytest
 
 from companion.apps import progress
+from companion.apps.args import shown
 from companion.apps.cli import main
 from companion.params import Params
 from companion.sim.runner import reporting, run_one, stream_one
@@ -67,3 +68,35 @@ def test_a_replay_shows_its_ticks(tmp_path, capsys, loud):
 def test_quick_commands_print_no_bar(tmp_path, capsys):
     assert main(["run", "line", "--duration", "1", "--out", str(tmp_path)]) == 0
     assert "simulated" not in capsys.readouterr().err
+
+
+def _interrupt_after(monkeypatch, count):
+    """The engine stops with Ctrl-C after ``count`` episodes."""
+    from companion.evaluate import run as engine
+
+    real = engine._backend
+
+    def interrupted(dask, workers, specs, reduce):
+        for n, item in enumerate(real(dask, workers, specs, reduce)):
+            if n == count:
+                raise KeyboardInterrupt
+            yield item
+    monkeypatch.setattr(engine, "_backend", interrupted)
+
+
+def test_an_interrupted_fuzz_says_what_it_kept(tmp_path, capsys, monkeypatch):
+    _interrupt_after(monkeypatch, 2)
+    out = tmp_path / "fuzz"
+    assert main(["fuzz", "--steps", "3000", "--controllers", "pid", "--sensing", "ideal",
+                 "--workers", "1", "--out", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert f"fuzz: stopped; 2 of 5 episodes kept in {shown(out / '.evaluate.partial')}: " \
+           "the same command continues from them" in err
+    assert err.rstrip().endswith("companion: interrupted; no output was changed")
+    assert not (out / "fuzz.json").exists()
+
+
+def test_an_interrupted_soak_says_nothing_was_kept(tmp_path, capsys, monkeypatch):
+    _interrupt_after(monkeypatch, 0)
+    assert main(["soak", "--duration", "5", "--out", str(tmp_path)]) == 130
+    assert "soak: stopped; nothing kept" in capsys.readouterr().err

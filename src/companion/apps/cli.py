@@ -1,9 +1,8 @@
-"""Command-line interface: ``companion run | scenarios | convergence | pedestrians | soak |
-fuzz | reproduce | tune | bench`` (the commands are in :mod:`companion.apps.commands`).
+"""Command-line interface: ``companion COMMAND`` (the commands are in :mod:`companion.apps.
+commands`, :mod:`~companion.apps.evaluation` and :mod:`~companion.apps.rosapps`).
 
 Bad usage or bad input files exit with code 2 and one line on stderr naming the file, line or
-key. Output files are written whole or not at all. Output cut short by the reader (``| head``)
-ends quietly.
+key. Outputs are written whole or not at all; a reader that goes away (``| head``) is quiet.
 """
 
 from __future__ import annotations
@@ -368,10 +367,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         from companion import _jit
         from companion.apps import commands
+        from companion.apps.progress import compile_kernels
 
         if args.command != "scenarios" and _jit.cold():
-            print("companion: compiling the numerical kernels for these sources, once (about "
-                  "half a minute; later runs load them)", file=sys.stderr, flush=True)
+            compile_kernels(main_thread)
         # The controller's matrices are 5x5: BLAS threads only cost hand-over time.
         with threadpool_limits(limits=1):
             if "." in args.func:    # a command of another module: "module.function"
@@ -382,10 +381,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except CompanionError as exc:
         print(f"companion: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        return 130
-    except Terminated:
-        return 143
+    except (KeyboardInterrupt, Terminated) as exc:
+        ctrl_c = isinstance(exc, KeyboardInterrupt)
+        print(f"companion: {'interrupted' if ctrl_c else 'terminated'}; no output was changed",
+              file=sys.stderr)
+        return 130 if ctrl_c else 143
     except BrokenPipeError:
         # The reader went away (``companion run ... | head``): stop quietly, and keep Python
         # from failing again when it flushes stdout at exit.

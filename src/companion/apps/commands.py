@@ -32,7 +32,7 @@ from companion.apps.args import (
     wrote,
 )
 from companion.apps.logfile import LogCsv, Thinned, write_log
-from companion.apps.progress import progress_bar, seconds_bar
+from companion.apps.progress import progress_bar, resumable, seconds_bar
 from companion.control import lookup
 from companion.evaluate import fuzz_runs
 from companion.evaluate.generators import soak_suite
@@ -175,7 +175,8 @@ def cmd_soak(args: argparse.Namespace) -> int:
     suite = soak_suite(duration, seed, args.controller, params)
     # with --log the episode runs here, its log going to disk as it runs; else through the
     # engine, kept in --out once run (as evaluate keeps its episodes)
-    with seconds_bar(duration) as reached, reporting(reached), Outputs(out, "soak") as stage:
+    with resumable("soak", out, 1), seconds_bar(duration) as reached, reporting(reached), \
+            Outputs(out, "soak") as stage:
         if args.log:
             blocks = started(stream_one(suite.episodes[0].spec))
             with LogCsv(stage / "log.csv") as csv:
@@ -219,7 +220,7 @@ def cmd_fuzz(args: argparse.Namespace) -> int:
     print(f"fuzz: >= {steps:,} steps, seed {seed}, {', '.join(controllers)} x "
           f"{', '.join(sensings)} sensing")
     episodes = sim_fuzz.plan(steps, seed, controllers, sensings)
-    with progress_bar(len(episodes), "episode") as progress:     # resumable in --out
+    with resumable("fuzz", out, len(episodes)), progress_bar(len(episodes), "episode") as progress:
         cases, counts = fuzz_runs.run(episodes, workers, progress, base, profiles, out,
                                       args.dask)
     pairs, total = fuzz_runs.by_pair(cases, counts)
@@ -259,8 +260,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     names = reproduce.controllers()
     print(f"Reproducing Fig. 3, Table 2, Fig. 4, Fig. 7 and Table 3 with {', '.join(names)} "
           f"into {out}")
-    with progress_bar(reproduce.episode_count(), "episode") as progress, \
-            Outputs(out, "reproduce") as stage:
+    with resumable("reproduce", out), progress_bar(reproduce.episode_count(), "episode") \
+            as progress, Outputs(out, "reproduce") as stage:
         result = reproduce.reproduce(stage, workers, progress, keep=out, dask=args.dask)
     finish(out)
     print(reproduce.fig3_summary(result.fig3))

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import argparse
 import re
-import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -24,7 +23,7 @@ from companion.apps.args import (
     workers_arg,
     wrote,
 )
-from companion.apps.progress import progress_bar
+from companion.apps.progress import progress_bar, resumable
 from companion.evaluate.report import write_episodes, write_summary
 from companion.evaluate.rows import failed
 from companion.evaluate.run import PARTIAL, finish, kept_count, run_suite
@@ -63,15 +62,8 @@ def evaluate(suite: Suite, out: Path, workers: int | None, dask: str | None = No
         total, partial, kept = len(suite.episodes), out / PARTIAL, kept_count(suite, out)
         if kept:
             print(f"resuming: {kept} of {total} episodes kept in {partial}", flush=True)
-        try:
-            with progress_bar(total, "episode") as bar:
-                rows = run_suite(suite, out, workers, dask, lambda done, total: bar(done))
-        except BaseException as exc:
-            if not isinstance(exc, Exception):      # Ctrl-C, SIGTERM: say what is kept
-                print(f"{suite.name}: stopped with {kept_count(suite, out)} of {total} "
-                      f"episodes kept in {partial}; the same command continues from them",
-                      file=sys.stderr, flush=True)
-            raise
+        with resumable(suite.name, out, total), progress_bar(total, "episode") as bar:
+            rows = run_suite(suite, out, workers, dask, lambda done, total: bar(done))
     summary = summarize(rows, suite.reference)
     with Outputs(out, "evaluate") as stage:
         write_episodes(stage / "episodes.csv", rows)
@@ -108,7 +100,8 @@ def cmd_tune(args: argparse.Namespace) -> int:
     storage = open_storage(args.storage)        # before the progress bar: errors on one line
     print(f"tuning {args.controller} on {suite.name}: {trials} trials of {n} episodes, "
           f"storage {args.storage or 'in memory'}")
-    with progress_bar(trials, "trial") as bar:
+    with resumable("tune", out, kept=f"the finished trials are kept in {args.storage}"
+                   if args.storage else None), progress_bar(trials, "trial") as bar:
         def progress(number: int, value: float) -> None:
             bar(min(number + 1, trials))
         tuned = tune_on_suite(suite, args.controller, trials, storage,

@@ -1,13 +1,21 @@
-"""The progress bars of the commands (on stderr, so that their printed results stay clean)."""
+"""The progress bars of the commands and what they say when interrupted (on stderr, so that
+their printed results stay clean)."""
 
 from __future__ import annotations
 
+import os
+import signal
 import sys
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
+from pathlib import Path
 from typing import TypeVar
 
 from tqdm import tqdm
+
+from companion import _jit
+from companion.apps.args import shown
+from companion.evaluate.run import PARTIAL, kept_results
 
 tqdm.monitor_interval = 0   # no monitor thread: the runner forks worker processes
 
@@ -57,3 +65,45 @@ def counted(items: Iterable[T], total: int, unit: str, what: str) -> Iterator[T]
     """``items`` with a bar of ``total`` ``unit`` s named ``what``, shown only after
     :data:`QUIET_S` (an animation's frames)."""
     yield from tqdm(items, total=total, unit=unit, desc=what, file=sys.stderr, delay=QUIET_S)
+
+
+@contextmanager
+def resumable(command: str, out: Path, total: int | None = None, kept: str | None = ""
+              ) -> Iterator[None]:
+    """Inside, Ctrl-C or SIGTERM first says what was kept and that the same command
+    continues from it: ``kept`` (None: nothing), by default the episodes (of ``total``) the
+    engine kept in ``out``."""
+    try:
+        yield
+    except BaseException as exc:
+        if not isinstance(exc, (Exception, SystemExit, GeneratorExit)):
+            if kept == "":
+                n = kept_results(out)
+                kept = (f"{n}{'' if total is None else f' of {total}'} episodes kept in "
+                        f"{shown(out / PARTIAL)}") if n else None
+            print(f"{command}: stopped; " + (f"{kept}: the same command continues from "
+                  f"them" if kept else "nothing kept"), file=sys.stderr, flush=True)
+        raise
+
+
+def compile_kernels(signals: bool = True) -> None:
+    """Compile the numerical kernels now, saying so (a cold cache: about half a minute).
+    With ``signals`` (the main thread), Ctrl-C or SIGTERM meanwhile ends the process at
+    once: raised inside numba's compiler an exception is swallowed by its C callbacks and
+    surfaces later as a RuntimeError. Nothing is written yet, and the cache keeps only
+    whole files."""
+    print("companion: compiling the numerical kernels for these sources, once (about half a "
+          "minute; later runs load them)", file=sys.stderr, flush=True)
+
+    def stop(signum: int, frame) -> None:
+        print("companion: stopped while compiling; no output was changed", file=sys.stderr,
+              flush=True)
+        os._exit(128 + signum)
+
+    kinds = (signal.SIGINT, signal.SIGTERM) if signals else ()
+    before = {kind: signal.signal(kind, stop) for kind in kinds}
+    try:
+        _jit.warm_up()
+    finally:
+        for kind, handler in before.items():
+            signal.signal(kind, handler)

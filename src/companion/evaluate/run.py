@@ -112,6 +112,24 @@ def kept_count(suite: Suite, out: Path) -> int:
     return sum(e.key in done for e in suite.episodes)
 
 
+def kept_results(out: Path) -> int:
+    """How many results the store in ``out`` holds, whatever suite made them (what a run
+    interrupted just now kept)."""
+    store = Path(out) / PARTIAL / "episodes.jsonl"
+    if not store.exists():
+        return 0
+    lines = store.read_text(encoding="utf-8").splitlines()[1:]
+    return sum(_whole(line) for line in lines)
+
+
+def _whole(line: str) -> bool:
+    try:
+        json.loads(line)
+    except json.JSONDecodeError:
+        return False
+    return True
+
+
 def _digest(suite: Suite) -> str:
     """What kept results must have been made with: the suite, its row function, the code."""
     return f"{suite.digest}:{_name(suite.row)}:{code_digest()}"
