@@ -24,6 +24,7 @@ from companion.apps.args import (
     wrote,
 )
 from companion.apps.progress import progress_bar, resumable
+from companion.evaluate import companions
 from companion.evaluate.report import write_episodes, write_summary
 from companion.evaluate.rows import failed
 from companion.evaluate.run import PARTIAL, finish, kept_count, run_suite
@@ -39,7 +40,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     out = output_dir(Path(args.out or Path("out") / f"evaluate-{name}"))
     rows = evaluate(suite, out, workers_arg(args), args.dask)
     print((out / "summary.md").read_text(encoding="utf-8"))
-    print(wrote(suite_outputs(out), f"and the figures in {shown(out)}"))
+    pairs = [out / "pairs.md", out / "pairs.csv"] if companions.beside_pairs(rows) else []
+    if pairs:
+        print(pairs[0].read_text(encoding="utf-8"))
+    print(wrote(suite_outputs(out) + pairs, f"and the figures in {shown(out)}"))
     return 1 if failures(suite, rows) else 0
 
 
@@ -72,6 +76,8 @@ def evaluate(suite: Suite, out: Path, workers: int | None, dask: str | None = No
         for name, fig in figures(rows, suite.reference):
             save_figure(fig, stage / name)
             plt.close(fig)
+        if companions.beside_pairs(rows):
+            companions.write(stage, rows)
         if extra is not None:
             extra(stage)
     finish(out)

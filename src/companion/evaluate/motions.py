@@ -14,17 +14,19 @@ import numpy as np
 
 from companion.config import reject_unknown
 from companion.data import pedestrians
-from companion.errors import ConfigError
+from companion.data.pairs import load_pairs
+from companion.errors import CompanionError, ConfigError
 from companion.params import SIDES, Params, params_from_mapping
 from companion.sim import convergence
+from companion.sim.pairs import pair_episode, pair_params, paired
 from companion.sim.person import line
 from companion.sim.recorded import RecordedPerson, load_person_csv
 from companion.sim.runner import EpisodeSpec
 from companion.sim.scenario import builtin_path, deep_merge, load_scenario
 from companion.sim.sensing import OBSTACLE_SOURCES
 
-KEYS = ("scenarios", "tracks", "data", "every", "offset", "min_mean_speed", "min_duration",
-        "convergence")
+KEYS = ("scenarios", "tracks", "pairs", "data", "every", "offset", "min_mean_speed",
+        "min_duration", "convergence")
 SCENARIO = ("name", "obstacles", "label")
 CONVERGENCE = ("speeds", "duration")
 #: The shipped walking tracks, by name.
@@ -42,6 +44,8 @@ class Motion:
     base: Callable[[str, dict], Params]
     build: Callable[[str, dict, str], EpisodeSpec]
     sides: tuple[str, ...] | None = None
+    shared: bool = True
+    """The motions of its group have the same parameters (False: its own, a pair's slot)."""
 
 
 def motions(data: Any, path: Path, digest: Any, resolve: Callable[[Any, Path], str]
@@ -59,13 +63,11 @@ def motions(data: Any, path: Path, digest: Any, resolve: Callable[[Any, Path], s
         out.append(_scenario(item, f"{where}.scenarios[{i}]", path, digest, resolve))
     if "convergence" in data:
         out += _convergence(data["convergence"], f"{where}.convergence")
+    every = _count(data.get("every", 1), f"{where}.every")
+    offset = data.get("offset", 0)
+    if isinstance(offset, bool) or not isinstance(offset, int) or not 0 <= offset < every:
+        raise ConfigError(f"{where}.offset: expected an integer in [0, every), got {offset!r}")
     if "tracks" in data:
-        every = _count(data.get("every", 1), f"{where}.every")
-        offset = data.get("offset", 0)
-        if isinstance(offset, bool) or not isinstance(offset, int) or not 0 <= offset < every:
-            raise ConfigError(f"{where}.offset: expected an integer in [0, every), got "
-                              f"{offset!r}")
-
         def track_base(label: str, over: dict) -> Params:
             return params_from_mapping(over)
 
@@ -74,9 +76,15 @@ def motions(data: Any, path: Path, digest: Any, resolve: Callable[[Any, Path], s
                             person=person) -> EpisodeSpec:
                 return EpisodeSpec(controller, person, Params(), person.duration)
             out.append(Motion(label, "tracks", track_base, track_build))
-    elif any(k in data for k in ("data", "every", "offset", "min_mean_speed", "min_duration")):
-        raise ConfigError(f"{where}: data, every, offset, min_mean_speed and min_duration "
-                          f"select tracks: expected tracks too")
+    elif any(k in data for k in ("data", "min_mean_speed")):
+        raise ConfigError(f"{where}: data and min_mean_speed select tracks: expected tracks "
+                          f"too")
+    if "pairs" in data:
+        out += pair_motions(data["pairs"], data, path, digest, resolve)[offset::every]
+    if not {"tracks", "pairs"} & set(data) and any(k in data for k in ("every", "offset",
+                                                                       "min_duration")):
+        raise ConfigError(f"{where}: every, offset and min_duration select tracks or pairs: "
+                          f"expected tracks or pairs too")
     if not out:
         raise ConfigError(f"{where}: expected at least one scenario, track or convergence "
                           f"start")
@@ -189,9 +197,53 @@ def _tracks(tracks: Any, data: Mapping, path: Path, digest: Any,
     return [(f.stem, load_person_csv(f)) for f in files]
 
 
-def fixed_sides(motion: Motion, sides: list[tuple[str, float]]) -> list[tuple[str, float]]:
-    """The (name, bearing) sides ``motion`` runs on."""
-    return sides if motion.sides is None else [(s, SIDES[s]) for s in motion.sides]
+#: The side name of a motion that brings its own slot (a walking pair's).
+OWN_SLOT = "companion"
+#: Shortest pair (s) a suite takes by default: a shorter walk says little about steadiness.
+PAIR_MIN_DURATION = 5.0
+
+
+def pair_motions(pairs: Any, data: Mapping, path: Path, digest: Any,
+                 resolve: Callable[[Any, Path], str]) -> list[Motion]:
+    """Every walking pair (:mod:`companion.data.pairs`; the shipped ones by name, or a
+    folder of the same layout) at least ``min_duration`` long, each both ways round: the
+    robot in the companion's place (:func:`companion.sim.pairs.pair_episode`)."""
+    where = f"{path}: motions.pairs"
+    if not isinstance(pairs, str):
+        raise ConfigError(f"{where}: expected {SHIPPED_TRACKS!r} or a folder of the walking "
+                          f"pairs' files, got {pairs!r}")
+    shortest = _number(data.get("min_duration", PAIR_MIN_DURATION),
+                       f"{path}: motions.min_duration")
+    try:
+        found = load_pairs(None if pairs == SHIPPED_TRACKS else resolve(pairs, path))
+    except CompanionError as exc:
+        raise ConfigError(f"{where}: {exc}") from None
+    out = []
+    for pair in found:
+        if pair.duration < shortest:
+            continue
+        digest.update(np.asarray((pair.t, pair.ax, pair.ay, pair.bx, pair.by)).tobytes())
+        for flipped in (False, True):
+            person = paired(pair, flipped)
+
+            def base(label: str, over: dict, person=person) -> Params:
+                return pair_params(person, params_from_mapping(over))
+
+            def build(label: str, over: dict, controller: str, person=person) -> EpisodeSpec:
+                return pair_episode(person, base(label, over), controller)
+            a, b = (pair.b, pair.a) if flipped else (pair.a, pair.b)
+            out.append(Motion(f"{pair.scene}/{a}+{b}", "pairs", base, build, (OWN_SLOT,),
+                              shared=False))
+    if not out:
+        raise ConfigError(f"{where}: no pair walks {shortest:g} s or longer; lower "
+                          f"min_duration")
+    return out
+
+
+def fixed_sides(motion: Motion, sides: list[tuple[str, float]]
+                ) -> list[tuple[str, float | None]]:
+    """The (name, bearing) sides ``motion`` runs on (None: the motion's own bearing)."""
+    return sides if motion.sides is None else [(s, SIDES.get(s)) for s in motion.sides]
 
 
 def _list(value: Any, where: str) -> list:

@@ -15,9 +15,12 @@ FACTORS = ("episode", "motion", "group", "side", "sensing", "controller", "seed"
 
 
 def write_episodes(path: Path, rows: Sequence[dict]) -> None:
-    numbers = [k for k in rows[0] if k not in FACTORS and k != "pair"]
+    """One line per row: its factors and every number any row has (empty where a row has
+    none, e.g. the human companion's numbers of an episode not beside a pair)."""
+    numbers = [k for k in dict.fromkeys(k for r in rows for k in r)
+               if k not in FACTORS and k != "pair"]
     with CsvWriter(path, [*FACTORS, *numbers]) as out:
-        out.add([r[k] for k in (*FACTORS, *numbers)] for r in rows)
+        out.add([r.get(k, "") for k in (*FACTORS, *numbers)] for r in rows)
 
 
 def write_summary(folder: Path, name: str, reference: str, summary: dict,

@@ -1,7 +1,8 @@
 """One episode as a row of numbers, and the pass criteria a suite may set on them.
 
 A row holds every scalar metric of :func:`companion.metrics.compute`, the fuzz's safety
-counts against the true person (:data:`COUNTS`) and ``safe``. A suite's ``[criteria]`` table
+counts against the true person (:data:`COUNTS`) and ``safe``; beside a walking pair, the
+human companion's numbers too (:func:`companion.sim.pairs.pair_row`). A suite's ``[criteria]`` table
 bounds any of them (``settling_time_s = {max = 20.0}``); an episode passes when every bound
 holds and the value is a number (a run that never settles has no settling time: it fails).
 """
@@ -16,6 +17,7 @@ from typing import Any
 from companion.errors import ConfigError
 from companion.metrics import Running, compute
 from companion.sim.fuzz import episode_counts
+from companion.sim.pairs import PairedPerson, pair_row
 from companion.sim.runner import EpisodeSpec, run_one
 from companion.types import Log
 
@@ -47,6 +49,8 @@ def row_of(spec: EpisodeSpec, log: Log) -> dict[str, Any]:
     row.update({k: int(counts[k]) for k in COUNTS})
     row["safe"] = (counts["person_collisions_robot"] == 0 and counts["violations"] == 0
                    and counts["obstacle_collisions"] == 0)
+    if isinstance(spec.person, PairedPerson):       # the human companion's numbers beside
+        row.update(pair_row(spec.person, spec.params, log))
     return row
 
 

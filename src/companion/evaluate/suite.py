@@ -169,7 +169,8 @@ def suite_from_mapping(data: Mapping[str, Any], path: Path, digest: Any = None) 
                 for seed in seeds:
                     episode_seed = _episode_seed(seed, m)
                     for label, name, overrides in controllers:
-                        key = (group, label, side_name, sensing_name)
+                        key = (group if motion.shared else motion.name, label, side_name,
+                               sensing_name)
                         if key not in final:
                             final[key] = _final(partial(base, label, overrides), name, bearing,
                                                 sensing_params,
