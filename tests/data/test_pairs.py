@@ -125,17 +125,35 @@ def test_the_report_puts_each_walk_in_its_speed_band_against_the_human():
     rows = [{"motion": f"m{i}", "sensing": "ideal", "controller": "lqr",
              "pair_speed_mps": speed, "rms_slot_error_m": robot, "human_deviation_m": 0.2,
              "companion_distance_m": 0.3, "min_person_distance_m": 0.7, "safety_share": 0.1,
-             "slot_moved_m": moved}
-            for i, (speed, robot, moved) in enumerate([(0.8, 0.1, 0.0), (0.9, 0.3, 0.05),
-                                                       (1.2, 0.1, 0.0), (1.5, 0.5, 0.0)])]
-    lines = {d["speeds"]: d for d in companions.table(rows + [{"motion": "track"}])}
+             "slot_moved_m": moved, "slot_distance_m": held}
+            for i, (speed, robot, moved, held) in enumerate([
+                (0.8, 0.1, 0.0, 0.65), (0.9, 0.3, 0.05, 0.8), (1.2, 0.1, 0.0, 1.0),
+                (1.5, 0.5, 0.0, 0.75)])]
+    lines = {d["band"]: d for d in companions.table(rows + [{"motion": "track"}])}
     assert lines["0-1"]["walks"] == 2 and lines["0-1"]["robot_steadier"] == 0.5
     assert lines["1-1.3"]["robot_median_cm"] == pytest.approx(10.0)
     assert lines["> 1.45"]["walks"] == 1 and "1.3-1.45" not in lines
     assert lines["<= 1.3"]["walks"] == 3 and lines["all"]["slots_moved"] == 1
+    near = {d["band"]: d["walks"] for d in companions.table(rows, "distance")}
+    assert near == {"0-0.7": 1, "0.7-0.9": 2, "> 0.9": 1, "all": 4}
     text = companions.markdown(list(lines.values()), rows)
     assert "1 of 4 walks had their slot inside the keep-out" in text and "Pellegrini" in text
 
 
 def _where():
     return Path("<test>")
+
+
+def test_no_step_whose_command_the_keepout_changed_reports_ok():
+    """Beside a real pair under realistic sensing the keep-out changes the command on many
+    steps (the braking bound, the evasive check): each of them says so in its status."""
+    from companion.params import load_sensing
+
+    person = paired(next(p for p in load_pairs() if p.name == "hotel/90+89"))
+    spec = pair_episode(person, Params().replace(sensing=load_sensing("realistic")))
+    log = run_one(spec)
+    changed = log["safety_shift_m"] > 1e-9
+    assert changed.sum() > 10
+    assert all(status != "ok" for status in np.asarray(log["status"])[changed])
+    reasons = {str(r) for r in np.asarray(log["reason"])[changed]}
+    assert any("braking" in r or "evasive" in r for r in reasons), reasons

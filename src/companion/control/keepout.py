@@ -57,6 +57,8 @@ from companion.types import Circle, Obstacle, PersonEstimate, PersonState, Pose
 
 #: Distance band (m) beyond the protective distance within which the evasive check always runs.
 EVASIVE_BAND = 0.3
+#: A speed (m/s) a rule changes by more than this is changed: its reason is reported.
+CHANGED = 1e-6
 
 
 def speed_bound(theta: float, nx: float, ny: float, approach: float, allowed: float
@@ -262,9 +264,11 @@ def keep_out(target: tuple[float, float, float], robot: Pose,
              prev: tuple[float, float] | None = None) -> tuple[float, float, float]:
     """The target ``(v, omega, u_ob)`` after rules 1-4 (module docstring) for the person
     ``estimate``; ``v_now`` is the robot's velocity now, ``prev`` the last command (None:
-    ``v_now``). Appends "evasive", "give_way", "protective_zone" or "stop_path" to
-    ``reasons`` when they act. Without an ``estimate`` (a lost person, while the robot
-    searches) there is no one to keep out of: only giving way and the stop path apply."""
+    ``v_now``). Appends "comfort_barrier", "evasive", "give_way", "protective_zone",
+    "braking" (rule 3 outside the zone) or "stop_path" to ``reasons`` when they act, so that
+    no step whose command a rule changed reports ``ok``. Without an ``estimate`` (a lost
+    person, while the robot searches) there is no one to keep out of: only giving way and
+    the stop path apply."""
     v, w, u_ob = target
     last = v_now if prev is None else prev
     if estimate is None:
@@ -279,7 +283,9 @@ def keep_out(target: tuple[float, float, float], robot: Pose,
         return v, w, u_ob
     person = estimate.state
     grow = params.keepout.uncertainty_sigmas * reaction_std(estimate, reaction_delay(params))
-    v = barrier_speed(v, robot, person, obstacles, params)
+    v, asked = barrier_speed(v, robot, person, obstacles, params), v
+    if abs(v - asked) > CHANGED:
+        reasons.append("comfort_barrier")
     threshold = params.keepout.collision_risk
     spread = params.keepout.heading_sigmas * heading_std(estimate)
     evade = None
@@ -296,8 +302,10 @@ def keep_out(target: tuple[float, float, float], robot: Pose,
             (v, w), u_ob = evade, 0.0
             reasons.append("give_way")
     allowed = person_interval(robot, person, params, reasons, grow, v_now[0])
-    v = clip_to(v, [allowed, *obstacle_bounds(robot, obstacles, params, v_now[0])],
-                params.robot.v_max)
+    v, asked = clip_to(v, [allowed, *obstacle_bounds(robot, obstacles, params, v_now[0])],
+                       params.robot.v_max), v
+    if abs(v - asked) > CHANGED and "protective_zone" not in reasons:
+        reasons.append("braking")
     stop = stop_path_target((v, w), robot, v_now, last, obstacles, params, allowed)
     if stop is not None:
         (v, w), u_ob = stop, 0.0

@@ -23,9 +23,11 @@ from companion.io import CsvWriter, atomic_write
 #: Bands of the pair's mean speed (m/s): the robot's 1.5 m/s limit leaves no margin to catch
 #: up with the fastest walkers.
 BANDS = ((0.0, 1.0), (1.0, 1.3), (1.3, 1.45), (1.45, math.inf))
+#: Bands of the companion's own distance from the person (m, their average slot).
+DISTANCES = ((0.0, 0.7), (0.7, 0.9), (0.9, math.inf))
 #: The pairs of the targets: walking up to this speed (m/s).
 TARGET_SPEED = 1.3
-COLUMNS = ("sensing", "controller", "speeds", "walks", "robot_median_cm", "human_median_cm",
+COLUMNS = ("sensing", "controller", "band", "walks", "robot_median_cm", "human_median_cm",
            "robot_steadier", "companion_distance_median_cm", "closest_m",
            "keepout_share_median", "slots_moved")
 
@@ -38,7 +40,7 @@ def beside_pairs(rows: Sequence[dict]) -> list[dict]:
 def _band(rows: list[dict], sensing: str, controller: str, label: str) -> dict:
     robot = np.array([r["rms_slot_error_m"] for r in rows])
     human = np.array([r["human_deviation_m"] for r in rows])
-    return {"sensing": sensing, "controller": controller, "speeds": label, "walks": len(rows),
+    return {"sensing": sensing, "controller": controller, "band": label, "walks": len(rows),
             "robot_median_cm": 100 * float(np.median(robot)),
             "human_median_cm": 100 * float(np.median(human)),
             "robot_steadier": float(np.mean(robot < human)),
@@ -49,31 +51,52 @@ def _band(rows: list[dict], sensing: str, controller: str, label: str) -> dict:
             "slots_moved": sum(r["slot_moved_m"] > 0 for r in rows)}
 
 
-def table(rows: Sequence[dict]) -> list[dict]:
-    """Per sensing and controller: one line per speed band that has walks, one for every
-    walk up to :data:`TARGET_SPEED` and one for all."""
+def _human_distance(row: dict) -> float:
+    return row["slot_distance_m"] - row["slot_moved_m"]
+
+
+def table(rows: Sequence[dict], by: str = "speed") -> list[dict]:
+    """Per sensing and controller: one line per band of the pair's speed (``by="speed"``,
+    then one for every walk up to :data:`TARGET_SPEED`) or of the companion's distance
+    (``by="distance"``) that has walks, and one for all."""
     rows = beside_pairs(rows)
+    value, bands = ((lambda r: r["pair_speed_mps"]), BANDS) if by == "speed" else \
+        (_human_distance, DISTANCES)
     out = []
     for sensing in dict.fromkeys(r["sensing"] for r in rows):
         for controller in dict.fromkeys(r["controller"] for r in rows):
             mine = [r for r in rows if r["sensing"] == sensing and r["controller"] == controller]
             if not mine:
                 continue
-            for lo, hi in BANDS:
-                band = [r for r in mine if lo < r["pair_speed_mps"] <= hi]
+            for lo, hi in bands:
+                band = [r for r in mine if lo < value(r) <= hi]
                 if band:
                     label = f"> {lo:g}" if hi == math.inf else f"{lo:g}-{hi:g}"
                     out.append(_band(band, sensing, controller, label))
             slow = [r for r in mine if r["pair_speed_mps"] <= TARGET_SPEED]
-            if slow:
+            if by == "speed" and slow:
                 out.append(_band(slow, sensing, controller, f"<= {TARGET_SPEED:g}"))
             out.append(_band(mine, sensing, controller, "all"))
     return out
 
 
-def markdown(lines: Sequence[dict], rows: Sequence[dict]) -> str:
-    """The table as markdown, with how many slots were moved out of the keep-out and why,
-    and the data's credit."""
+def _lines(lines: Sequence[dict], band: str) -> list[str]:
+    text = [f"| sensing | controller | {band} | walks | robot (cm) | human (cm) | robot "
+            "steadier | from the companion's path (cm) | closest (m) | keep-out share | "
+            "slots moved |", "|---" * 11 + "|"]
+    for d in lines:
+        text.append(f"| {d['sensing']} | {d['controller']} | {d['band']} | {d['walks']} | "
+                    f"{d['robot_median_cm']:.1f} | {d['human_median_cm']:.1f} | "
+                    f"{d['robot_steadier']:.0%} | {d['companion_distance_median_cm']:.1f} | "
+                    f"{d['closest_m']:.2f} | {d['keepout_share_median']:.0%} | "
+                    f"{d['slots_moved']} |")
+    return text
+
+
+def markdown(lines: Sequence[dict], rows: Sequence[dict],
+             distances: Sequence[dict] = ()) -> str:
+    """The table by speed (and by the companion's distance) as markdown, with how many
+    slots were moved out of the keep-out and why, and the data's credit."""
     rows = beside_pairs(rows)
     moved = [r for r in rows if r["slot_moved_m"] > 0]
     walks = {r["motion"] for r in rows}
@@ -91,22 +114,19 @@ def markdown(lines: Sequence[dict], rows: Sequence[dict]) -> str:
                  f"{100 * float(np.median([r['slot_moved_m'] for r in moved])):.0f} cm "
                  f"farther (slot_moved_m in episodes.csv); their errors are against that slot, "
                  f"the human's against theirs.", ""]
-    text += ["| sensing | controller | pair speed (m/s) | walks | robot (cm) | human (cm) | "
-             "robot steadier | from the companion's path (cm) | closest (m) | keep-out share "
-             "| slots moved |", "|---" * 11 + "|"]
-    for d in lines:
-        text.append(f"| {d['sensing']} | {d['controller']} | {d['speeds']} | {d['walks']} | "
-                    f"{d['robot_median_cm']:.1f} | {d['human_median_cm']:.1f} | "
-                    f"{d['robot_steadier']:.0%} | {d['companion_distance_median_cm']:.1f} | "
-                    f"{d['closest_m']:.2f} | {d['keepout_share_median']:.0%} | "
-                    f"{d['slots_moved']} |")
+    text += _lines(lines, "pair speed (m/s)")
+    if distances:
+        text += ["", "By the companion's own distance from the person:", "",
+                 *_lines(distances, "companion's distance (m)")]
     return "\n".join(text + ["", "Data: " + CREDIT]) + "\n"
 
 
 def write(folder: Path, rows: Sequence[dict]) -> None:
     """``pairs.md`` and ``pairs.csv`` in ``folder``."""
-    lines = table(rows)
-    atomic_write(folder / "pairs.md", lambda p: p.write_text(markdown(lines, rows),
-                                                             encoding="utf-8"))
-    with CsvWriter(folder / "pairs.csv", list(COLUMNS)) as out:
-        out.add([d[k] for k in COLUMNS] for d in lines)
+    lines, distances = table(rows), table(rows, "distance")
+    atomic_write(folder / "pairs.md", lambda p: p.write_text(
+        markdown(lines, rows, distances), encoding="utf-8"))
+    with CsvWriter(folder / "pairs.csv", ["by", *COLUMNS]) as out:
+        out.add([by, *(d[k] for k in COLUMNS)] for by, part in (("speed", lines),
+                                                                ("distance", distances))
+                for d in part)
