@@ -157,3 +157,15 @@ def test_no_step_whose_command_the_keepout_changed_reports_ok():
     assert all(status != "ok" for status in np.asarray(log["status"])[changed])
     reasons = {str(r) for r in np.asarray(log["reason"])[changed]}
     assert any("braking" in r or "evasive" in r for r in reasons), reasons
+
+
+def test_the_robustness_suite_crosses_shapes_tracks_and_pairs_with_five_detectors():
+    suite = load_suite("robustness")
+    assert {e.sensing for e in suite.episodes} == {"ideal", "em-tracker", "clean", "realistic",
+                                                  "all worse"}
+    assert {e.group for e in suite.episodes} == {"line", "circle", "figure8", "ushape",
+                                                 "tracks", "pairs"}
+    clean = next(e.spec.params.sensing for e in suite.episodes if e.sensing == "clean")
+    assert (clean.person_position_noise_m, clean.person_rate_hz, clean.person_latency_s,
+            clean.actuator_tau_s) == (0.03, 10.0, 0.0, 0.0)
+    assert len({e.controller for e in suite.episodes}) == 6
