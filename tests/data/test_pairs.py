@@ -138,6 +138,8 @@ def test_the_report_puts_each_walk_in_its_speed_band_against_the_human():
     assert near == {"0-0.7": 1, "0.7-0.9": 2, "> 0.9": 1, "all": 4}
     text = companions.markdown(list(lines.values()), rows)
     assert "1 of 4 walks had their slot inside the keep-out" in text and "Pellegrini" in text
+    printed = companions.short(rows)
+    assert "| <= 1.3 | 3 |" in printed and "| all | 4 |" in printed and "| 0-1 |" not in printed
 
 
 def _where():

@@ -42,7 +42,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     print((out / "summary.md").read_text(encoding="utf-8"))
     pairs = [out / "pairs.md", out / "pairs.csv"] if companions.beside_pairs(rows) else []
     if pairs:
-        print(pairs[0].read_text(encoding="utf-8"))
+        print(companions.short(rows))
     print(wrote(suite_outputs(out) + pairs, f"and the figures in {shown(out)}"))
     return 1 if failures(suite, rows) else 0
 

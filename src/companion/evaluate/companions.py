@@ -121,6 +121,14 @@ def markdown(lines: Sequence[dict], rows: Sequence[dict],
     return "\n".join(text + ["", "Data: " + CREDIT]) + "\n"
 
 
+def short(rows: Sequence[dict]) -> str:
+    """The lines of every walk up to :data:`TARGET_SPEED` and of all walks, per sensing and
+    controller, as markdown (the bands are in ``pairs.md``)."""
+    lines = [d for d in table(rows) if d["band"] in (f"<= {TARGET_SPEED:g}", "all")]
+    return "\n".join(["## The robot against the human companion (medians; every band in "
+                      "pairs.md)", "", *_lines(lines, "pair speed (m/s)")]) + "\n"
+
+
 def write(folder: Path, rows: Sequence[dict]) -> None:
     """``pairs.md`` and ``pairs.csv`` in ``folder``."""
     lines, distances = table(rows), table(rows, "distance")
