@@ -115,19 +115,7 @@ def kept_count(suite: Suite, out: Path) -> int:
 def kept_results(out: Path) -> int:
     """How many results the store in ``out`` holds, whatever suite made them (what a run
     interrupted just now kept)."""
-    store = Path(out) / PARTIAL / "episodes.jsonl"
-    if not store.exists():
-        return 0
-    lines = store.read_text(encoding="utf-8").splitlines()[1:]
-    return sum(_whole(line) for line in lines)
-
-
-def _whole(line: str) -> bool:
-    try:
-        json.loads(line)
-    except json.JSONDecodeError:
-        return False
-    return True
+    return len(_read(Path(out) / PARTIAL / "episodes.jsonl")[1])
 
 
 def _digest(suite: Suite) -> str:
@@ -156,23 +144,30 @@ def _backend(dask: str | None, workers: int | None, specs: Sequence[EpisodeSpec]
 
 def _load(store: Path, digest: str) -> tuple[bool, dict[str, dict]]:
     """Whether ``store`` belongs to the suite of ``digest``, and the results kept there."""
-    if not store.exists():
+    header, results = _read(store)
+    if header.get("digest") != digest:
         return False, {}
+    return True, results
+
+
+def _read(store: Path) -> tuple[dict, dict[str, Any]]:
+    """The header of ``store`` and the results it keeps, by episode key (none without the
+    file or a readable header; a line cut short by a kill is left out: it runs again)."""
+    if not store.exists():
+        return {}, {}
     lines = store.read_text(encoding="utf-8").splitlines()
     try:
         header = json.loads(lines[0]) if lines else {}
     except json.JSONDecodeError:
-        return False, {}
-    if header.get("digest") != digest:
-        return False, {}
+        return {}, {}
     out = {}
     for line in lines[1:]:
         try:
             item = json.loads(line)
-        except json.JSONDecodeError:       # the last line of a killed run: run it again
+        except json.JSONDecodeError:
             continue
         out[item["key"]] = item["result"]
-    return True, out
+    return header, out
 
 
 class _Appender:
