@@ -281,6 +281,14 @@ point_clearances = kernel(_point_clearances,
                           lambda: (np.zeros(2), np.ones(2), sample_obstacles(), 0.0))
 
 
+def speed_turn_std(cov: np.ndarray, theta: float) -> tuple[float, float]:
+    """Standard deviations of a walker's speed along its heading ``theta`` (m/s) and of its
+    turn rate (rad/s) from the covariance ``cov`` of a state (x, y, vx, vy, omega)."""
+    c, s = math.cos(theta), math.sin(theta)
+    var = c * c * cov[2, 2] + c * s * (cov[2, 3] + cov[3, 2]) + s * s * cov[3, 3]
+    return math.sqrt(max(float(var), 0.0)), math.sqrt(max(float(cov[4, 4]), 0.0))
+
+
 def major_std(cov: np.ndarray) -> float:
     """The square root of the largest eigenvalue of the 2x2 position block of ``cov``: the
     standard deviation (m) along the least certain direction (closed form, symmetrised)."""

@@ -154,9 +154,10 @@ class Observation:
     known at that time (world frame), the LiDAR scan they came from (None without a LiDAR),
     the robot's measured velocity ``(v, omega)`` from odometry (None: unknown), the person
     detections that arrived since the last sample, the sources that are stale, the time
-    of the odometry sample the velocity comes from (None: ``t``), and the formation in force
+    of the odometry sample the velocity comes from (None: ``t``), the formation in force
     ``(distance, bearing)`` (m, rad; None: the controller's configured one), which a
-    formation policy changes while walking.
+    formation policy changes while walking, and the standard deviations of the person's
+    estimated speed and turn rate ``(m/s, rad/s)`` (None: ``person`` is exact).
 
     The standard stack's input is the detections: its safety supervisor tracks the person
     from them and hands the layers inside it ``person``, the estimate. A ``person`` given to
@@ -175,6 +176,7 @@ class Observation:
     stale: tuple[str, ...] = ()
     robot_stamp: float | None = None
     formation: tuple[float, float] | None = None
+    person_std: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)

@@ -181,7 +181,8 @@ def test_losing_refinding_searching_and_view_are_counted_across_blocks():
 
 def test_the_detector_sees_within_its_range_and_not_through_walkers():
     sc = load_scenario("crowd-crossing")
-    near = sc.params.replace(sensing=dataclasses.replace(REALISTIC, person_range_m=1.3))
+    # the robot walks 1.0-1.24 m from the person here: a 1.22 m range loses them at times
+    near = sc.params.replace(sensing=dataclasses.replace(REALISTIC, person_range_m=1.22))
     m = metrics.compute(run_one(dataclasses.replace(sc, params=near).episode("lqr")))
     assert 0.0 < m["person_in_view_share"] < 1.0 and m["person_losses"] >= 1
     m = metrics.compute(run_one(dataclasses.replace(

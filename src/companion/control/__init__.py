@@ -24,11 +24,13 @@ from companion.params import Params
 
 
 def paper_params(params: Params) -> Params:
-    """The paper's design: LQR linearised at the desired state, u_d = u_h, no error clipping,
-    the paper's phi in Eq. 17 (no collision cone) and no comfort barriers (the supervisor's
-    protective distance and braking bounds stay: they are not part of the compared design)."""
+    """The paper's design: LQR linearised at the desired state, u_d = u_h always trusted, no
+    error clipping, the paper's phi in Eq. 17 (no collision cone) and no comfort barriers
+    (the supervisor's protective distance and braking bounds stay: they are not part of the
+    compared design)."""
     lqr = dataclasses.replace(params.lqr, linearize_at="desired", feedforward="person",
-                              error_clip=(math.inf, math.inf, math.inf))
+                              error_clip=(math.inf, math.inf, math.inf),
+                              feedforward_std=(math.inf, math.inf))
     keepout = dataclasses.replace(params.keepout, person_clearance=0.0, obstacle_clearance=0.0)
     avoidance = dataclasses.replace(params.avoidance, cone_margin=-1.0)
     return dataclasses.replace(params, lqr=lqr, keepout=keepout, avoidance=avoidance)
@@ -46,8 +48,11 @@ TUNED_LQR_R = (1.566, 41.36)
 
 
 def tuned_lqr_params(params: Params) -> Params:
-    """Our LQR with the tuned Q and R (:data:`TUNED_LQR_Q`) instead of Table 1's."""
-    lqr = dataclasses.replace(params.lqr, q=TUNED_LQR_Q, r=TUNED_LQR_R)
+    """Our LQR with the tuned Q and R (:data:`TUNED_LQR_Q`) instead of Table 1's. They were
+    tuned with the feedforward always trusted and already weigh ``u_e`` lightly, so it stays
+    trusted (docs/model.md, section 4.6)."""
+    lqr = dataclasses.replace(params.lqr, q=TUNED_LQR_Q, r=TUNED_LQR_R,
+                              feedforward_std=(math.inf, math.inf))
     return dataclasses.replace(params, lqr=lqr)
 
 

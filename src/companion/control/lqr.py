@@ -7,9 +7,10 @@ Per sample period:
    or the slot reference that holds the formation (:func:`companion.model.slot_reference`);
 3. linearise Eq. (7) at the desired state (paper) or the measured one (ours), discretise and
    augment with the last input (:func:`augmented_model`);
-4. solve the Riccati equation for ``K`` (:func:`companion.riccati.solve_gain`, compiled or
-   scipy) and apply ``u = u_d + u_e(k-1) - K xi`` (Eq. 16) with the state error clipped to
-   ``lqr.error_clip``, saturated to the input limits.
+4. weigh the feedforward by its confidence (:func:`feedforward_weights`), solve the Riccati
+   equation for ``K`` (:func:`companion.riccati.solve_gain`, compiled or scipy) and apply
+   ``u = u_d + u_e(k-1) - K xi`` (Eq. 16) with the state error clipped to ``lqr.error_clip``,
+   saturated to the input limits.
 
 ``u_e(k-1)`` is the command actually sent minus ``u_d`` (told through :meth:`applied`), so
 saturation and the outer layers cannot wind it up.
@@ -32,6 +33,8 @@ from companion.types import Command, Observation
 
 #: Person speed (m/s) of the operating point of the fallback gain.
 REST_SPEED = 0.5
+#: The feedforward's weights shrink at most by this factor (:func:`feedforward_weights`).
+LEAST_TRUST = 10.0
 
 
 @jitable
@@ -58,6 +61,29 @@ def augmented_model(chi, u, w, params: Params) -> tuple[np.ndarray, np.ndarray]:
                             float(w[0]), float(d), float(dt))
     jx, ju = jacobians((rho, chi[1], chi[2]), u, w, d)
     return augment(*discretize(jx, ju, dt, lqr.discretization))
+
+
+def feedforward_weights(q: np.ndarray, person_std: tuple[float, float] | None,
+                        trusted: tuple[float, float], rho_d: float) -> np.ndarray:
+    """The LQR's state weights ``q`` with those on ``v_e`` and ``omega_e`` divided by
+    ``1 + (std / trusted)^2``, where ``std`` is that of the feedforward's speed (the person's
+    speed and ``rho_d`` times their turn rate: the slot's velocity) and turn rate.
+
+    ``u_e`` is the input's deviation from the feedforward; weighing it says how far to trust
+    the feedforward. Built from a noisy estimate, a fully trusted feedforward holds the robot
+    off its slot on average (docs/model.md, section 4.6). The weights shrink at most
+    :data:`LEAST_TRUST`-fold: a fresh track, metres off with a wide spread, would otherwise
+    leave the LQR on feedback alone to it. ``person_std`` None (an exact person) or
+    ``trusted`` inf leaves ``q`` as it is.
+    """
+    if person_std is None:
+        return q
+    speed, turn = person_std
+    out = q.copy()
+    out[3] /= min(1.0 + (speed * speed + (rho_d * turn) ** 2) / (trusted[0] * trusted[0]),
+                  LEAST_TRUST)
+    out[4] /= min(1.0 + (turn / trusted[1]) ** 2, LEAST_TRUST)
+    return out
 
 
 def rest_operating_point(params: Params) -> tuple[tuple, tuple, tuple]:
@@ -152,8 +178,8 @@ class LqrController:
             chi, u = (rho_d, alpha_d, beta_d), (v_d, omega_d)
         else:
             chi, u = (rho, alpha, beta), (v_d + e_v, omega_d + e_w)
-        k = solve_gain(*augmented_model(chi, u, (h.v, h.omega), p), self._q, self._r,
-                       p.lqr.solver)
+        q = feedforward_weights(self._q, obs.person_std, p.lqr.feedforward_std, rho_d)
+        k = solve_gain(*augmented_model(chi, u, (h.v, h.omega), p), q, self._r, p.lqr.solver)
         if k is not None:
             self._gain = k
         elif self._gain is None:

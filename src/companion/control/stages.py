@@ -29,7 +29,7 @@ from companion.control.delays import DelayMeter
 from companion.control.keepout import keep_out
 from companion.control.limits import limit
 from companion.control.slot import reference_point, slot_point
-from companion.geometry import unicycle_step, wrap_pi
+from companion.geometry import speed_turn_std, unicycle_step, wrap_pi
 from companion.params import Params
 from companion.perception import checked_scan
 from companion.perception.front_end import FrontEnd
@@ -237,7 +237,8 @@ class Driving:
             robot, person = Pose(x, y, wrap_pi(th)), predict(person, tau)
         f = s.params.formation
         return Observation(s.t, robot, person, s.obstacles, s.scan, s.velocity,
-                           formation=(f.distance, f.bearing))
+                           formation=(f.distance, f.bearing),
+                           person_std=speed_turn_std(s.estimate.covariance, person.theta))
 
 
 class Guarding:

@@ -114,6 +114,12 @@ class LqrParams(Validated):
         "no clipping)", all_positive_or_inf)
     rho_min: float = param(0.2, "m", "floor on rho in the Jacobians (the model is singular at "
                            "rho = 0)", positive)
+    feedforward_std: tuple[float, float] = param(
+        (0.1, 0.1), "m/s, rad/s",
+        "the person's estimated speed and turn rate are trusted as exact up to these standard "
+        "deviations; beyond, the weights on v_e and omega_e shrink by 1 + (std / this)^2, so "
+        "the LQR leans on feedback, not on a feedforward the estimate does not support (ours; "
+        "inf = paper-literal, always trusted)", all_positive_or_inf)
 
 
 @dataclasses.dataclass(frozen=True)
