@@ -364,11 +364,12 @@ def test_version_is_the_package_version(capsys):
 
 
 def test_cli_choices_are_the_registries():
-    from companion.apps import cli
+    from companion.apps import cli, flags
     from companion.control import CONTROLLERS
     from companion.evaluate.tuning import SPACES
-    from companion.params import SIDES
+    from companion.params import PLANTS, SIDES
 
+    assert flags.PLANTS == PLANTS
     assert cli.CONTROLLERS == tuple(sorted(CONTROLLERS))
     assert cli.TUNABLE == tuple(sorted(SPACES))
     assert cli.SIDES == tuple(sorted(SIDES))

@@ -17,9 +17,11 @@ pytestmark = [pytest.mark.filterwarnings("ignore:.*Box observation space:UserWar
               pytest.mark.filterwarnings("ignore:.*symmetric and normalized space:UserWarning")]
 
 
-@pytest.mark.parametrize("sensing", ["ideal", "realistic"])
-def test_the_gymnasium_checker_passes(sensing):
-    env = gym.make("companion/Follow-v0", scenario="line", sensing=sensing, duration=3.0)
+@pytest.mark.parametrize("sensing, plant", [("ideal", "kinematic"), ("realistic", "kinematic"),
+                                             ("realistic", "mujoco")])
+def test_the_gymnasium_checker_passes(sensing, plant):
+    env = gym.make("companion/Follow-v0", scenario="line", sensing=sensing, duration=3.0,
+                   plant=plant)
     check_env(env.unwrapped, skip_render_check=True)
     obs, _ = env.reset(seed=0)
     assert obs.shape == (len(OBSERVATION),) and env.observation_space.contains(obs)

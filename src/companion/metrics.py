@@ -14,6 +14,7 @@
   separate collisions;
 * the shares of the samples in which the safety supervisor was ok, degraded or stopped;
 * the social-navigation measures of a robot among people (:mod:`companion.social`);
+* the plant's: contacts the physics found and the odometry's largest drift (docs/plants.md);
 * where the slot error comes from (docs/sensing.md): the RMS of the slot error, of the
   estimate's own error and of the tracking of the estimated slot (over the samples with an
   estimate), and the displacement the keep-out imposed, summed over the run, with the share
@@ -211,6 +212,31 @@ class Split:
         return out
 
 
+class PlantMeasures:
+    """The plant's own measures over consecutive blocks: the contacts the physics found (the
+    number of times the robot's body began to touch the person or an obstacle; None on a
+    plant without bodies) and the odometry's largest distance from the true pose (m)."""
+
+    def __init__(self) -> None:
+        self._contacts: int | None = None
+        self._touching = False
+        self._drift = 0.0
+
+    def add(self, log: Log) -> None:
+        c = log["plant_contact"]
+        if np.all(np.isnan(c)):
+            return
+        touching = np.concatenate(([self._touching], c > 0.5))
+        self._contacts = (self._contacts or 0) + int(np.count_nonzero(touching[1:]
+                                                                        & ~touching[:-1]))
+        self._touching = bool(touching[-1])
+        drift = np.hypot(log["odom_x"] - log["robot_x"], log["odom_y"] - log["robot_y"])
+        self._drift = max(self._drift, float(np.max(drift)))
+
+    def value(self) -> dict:
+        return {"plant_contacts": self._contacts, "odometry_drift_m": self._drift}
+
+
 class Running:
     """All the metrics of :func:`compute` over consecutive blocks of one episode's log:
     ``add`` each block in order, then ``value()``. Sums of squares, minima and counts are
@@ -225,6 +251,7 @@ class Running:
         self._statuses = Statuses()
         self._split = Split()
         self._social = Social()
+        self._plant = PlantMeasures()
         self._finite = True
         self._times: list[float] = []          # the first two sample times
         self._last: tuple[float, dict] = (math.nan, {})
@@ -243,6 +270,7 @@ class Running:
         self._statuses.add(log)
         self._split.add(log)
         self._social.add(log)
+        self._plant.add(log)
         self._finite = self._finite and bool(np.all(np.isfinite(log["v"]))
                                              and np.all(np.isfinite(log["omega"])))
         t = log["t"]
@@ -271,6 +299,7 @@ class Running:
         values.update(self._statuses.value())
         values.update(self._split.value(self.steps))
         values.update(self._social.value())
+        values.update(self._plant.value())
         values["finite"] = bool(self._finite and math.isfinite(rms["rmse_rho_m"])
                                 and math.isfinite(rms["rmse_alpha_rad"]))
         return values

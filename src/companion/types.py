@@ -220,7 +220,8 @@ LOG_COLUMNS = ("t", "robot_x", "robot_y", "robot_theta", "person_x", "person_y",
                "robot_v", "robot_omega", "person_est_x", "person_est_y", "person_est_theta",
                "person_est_v", "person_est_omega", "person_est_std", "slot_error_m",
                "estimate_error_m", "tracking_error_m", "safety_shift_m", "person_gap_m",
-               "walker_gap_m", "walker_contact", "person_in_view")
+               "walker_gap_m", "walker_contact", "person_in_view", "odom_x", "odom_y",
+               "odom_theta", "plant_contact")
 """Numeric columns of an episode log: the true state of robot and person, the relative state,
 ``beta_ref`` (heading offset that holding the slot needs), the command (``v``, ``omega``),
 ``u_ob`` (the avoidance part of omega, rad/s), ``rho_ob`` (clearance from the robot's
@@ -234,7 +235,10 @@ true person's slot, ``estimate_error_m`` from the slot the estimate implies to t
 of R over one period against the controller's request; 0 without a request); the crowd
 columns (docs/crowds.md): ``person_gap_m``, ``walker_gap_m``, ``walker_contact`` and
 ``person_in_view`` (1 where the person detector could see the person, 0 out of its range or
-hidden)."""
+hidden); the pose the robot's odometry reports (``odom_x``, ``odom_y``, ``odom_theta``: the
+true pose on the kinematic plant, dead reckoning from the wheels on the MuJoCo base) and
+``plant_contact`` (1 where the plant's physics finds the robot's body touching the person or
+an obstacle, 0 where not, NaN on a plant without bodies; docs/plants.md)."""
 
 TEXT_COLUMNS = ("status", "reason")
 """The safety supervisor's status and reason per sample ("ok" and "" without one)."""

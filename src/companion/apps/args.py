@@ -102,8 +102,13 @@ def params_arg(args: argparse.Namespace) -> Params:
 
 
 def with_sensing(params: Params, args: argparse.Namespace) -> Params:
-    sensing = getattr(args, "sensing", None)
-    return params if sensing is None else params.replace(sensing=sensing_arg(sensing))
+    """``params`` with the ``--sensing`` and ``--plant`` given (each if given)."""
+    sensing, plant = getattr(args, "sensing", None), getattr(args, "plant", None)
+    if sensing is not None:
+        params = params.replace(sensing=sensing_arg(sensing))
+    if plant is not None:
+        params = params.replace(plant=dataclasses.replace(params.plant, kind=plant))
+    return params
 
 
 def sensing_arg(name: str) -> SensingParams:

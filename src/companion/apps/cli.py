@@ -17,7 +17,11 @@ import threading
 from collections.abc import Sequence
 from importlib.metadata import version
 
+from companion.apps.flags import dask_flag as _dask
 from companion.apps.flags import help_range as rng
+from companion.apps.flags import plant_flag as _plant
+from companion.apps.flags import sensing_flags as _sensing
+from companion.apps.flags import workers_flag as _workers
 from companion.config import hint
 from companion.errors import CompanionError
 
@@ -61,23 +65,6 @@ def _flags(parser: argparse.ArgumentParser) -> list[str]:
             for sub in action.choices.values():
                 flags += _flags(sub)
     return flags
-
-
-def _sensing(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--sensing", metavar="PROFILE", help="ideal, realistic, em-tracker or a TOML "
-                   "file of sensing keys (docs/sensing.md); default: the scenario's, else ideal")
-
-
-def _dask(p: argparse.ArgumentParser, when: str = "") -> None:
-    p.add_argument("--dask", metavar="ADDRESS", help=f"{when}run the episodes on Dask: 'local' "
-                   "starts a LocalCluster on 127.0.0.1, tcp://HOST:PORT uses a running "
-                   "scheduler (default: local worker processes)")
-
-
-def _workers(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--workers", type=int, metavar="N",
-                   help=f"worker processes for the episodes, {rng('--workers', 'N')} "
-                        "(default: one per CPU)")
 
 
 def parser() -> argparse.ArgumentParser:
@@ -237,6 +224,7 @@ def parser() -> argparse.ArgumentParser:
                     "episodes draw their own formation and take --sensing's profiles)")
     fz.add_argument("--out", metavar="DIR", help="output folder (default out/fuzz); a killed "
                     "run continues there on the next call")
+    _plant(fz)
     _dask(fz)
     _workers(fz)
     fz.set_defaults(func="cmd_fuzz")

@@ -28,6 +28,7 @@ from companion.apps.args import (
     params_arg,
     seed_arg,
     shown,
+    with_sensing,
     workers_arg,
     wrote,
 )
@@ -199,7 +200,7 @@ def cmd_soak(args: argparse.Namespace) -> int:
 def cmd_fuzz(args: argparse.Namespace) -> int:
     controllers, profiles = fuzz.selection(args)
     sensings = tuple(profiles)
-    base = file_params(args)
+    base = with_sensing(file_params(args), argparse.Namespace(plant=args.plant))
     out = output_dir(Path(args.out or Path("out") / "fuzz"))
     if args.replay is not None:
         if len(controllers) != 1 or len(sensings) != 1:

@@ -1,9 +1,11 @@
-"""The ranges of the numeric command-line flags: the one place that the checks
-(:mod:`companion.apps.args`) and ``--help`` (:mod:`companion.apps.cli`) both read. Standard
-library only, so that ``--help`` loads no numerics."""
+"""The flags several commands share, and the ranges of the numeric command-line flags: the
+one place that the checks (:mod:`companion.apps.args`) and ``--help``
+(:mod:`companion.apps.cli`) both read. Standard library only, so that ``--help`` loads no
+numerics."""
 
 from __future__ import annotations
 
+import argparse
 from dataclasses import dataclass
 
 from companion.config import MAX_DURATION, MAX_MAGNITUDE
@@ -64,3 +66,32 @@ FLAGS: dict[str, Bound] = {
 def help_range(flag: str, metavar: str) -> str:
     """The range of ``flag`` for its ``--help`` line."""
     return FLAGS[flag].text(metavar)
+
+
+#: The plants ``--plant`` takes (:data:`companion.params.PLANTS`; tests/test_cli.py checks).
+PLANTS = ("kinematic", "mujoco")
+
+
+def plant_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--plant", choices=PLANTS, help="the robot's base: kinematic (a unicycle "
+                   "with lag) or mujoco (mass, wheels, motors, slip; docs/plants.md); default: "
+                   "the scenario's or parameters', else kinematic")
+
+
+def sensing_flags(p: argparse.ArgumentParser) -> None:
+    """``--sensing`` and ``--plant``: the world an episode runs in."""
+    p.add_argument("--sensing", metavar="PROFILE", help="ideal, realistic, em-tracker or a TOML "
+                   "file of sensing keys (docs/sensing.md); default: the scenario's, else ideal")
+    plant_flag(p)
+
+
+def dask_flag(p: argparse.ArgumentParser, when: str = "") -> None:
+    p.add_argument("--dask", metavar="ADDRESS", help=f"{when}run the episodes on Dask: 'local' "
+                   "starts a LocalCluster on 127.0.0.1, tcp://HOST:PORT uses a running "
+                   "scheduler (default: local worker processes)")
+
+
+def workers_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--workers", type=int, metavar="N",
+                   help=f"worker processes for the episodes, {help_range('--workers', 'N')} "
+                        "(default: one per CPU)")

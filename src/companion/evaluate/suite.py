@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import itertools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -26,6 +27,7 @@ from companion.errors import ConfigError
 from companion.evaluate.motions import fixed_sides, motions
 from companion.evaluate.rows import Criterion, criteria_from, summary_row
 from companion.params import (
+    PLANTS,
     SIDES,
     Formation,
     Params,
@@ -38,8 +40,8 @@ from companion.sim.recorded import RecordedPerson
 from companion.sim.runner import EpisodeSpec
 from companion.sim.sensing import OBSTACLE_SOURCES
 
-TOP = ("name", "description", "reference", "seeds", "controllers", "sensing", "sides",
-       "obstacles", "duration", "motions", "faults", "criteria")
+TOP = ("name", "description", "reference", "seeds", "controllers", "sensing", "plants",
+       "sides", "obstacles", "duration", "motions", "faults", "criteria")
 CONTROLLER = ("name", "params", "label")
 #: The suites shipped with companion (``companion evaluate NAME``).
 BUILTIN = Path(__file__).resolve().parent.parent / "suites"
@@ -51,7 +53,8 @@ MAX_EPISODES = 100_000
 @dataclass(frozen=True)
 class Episode:
     """One episode of a suite: its factors (``motion``, ``group``: the scenario's name or
-    ``tracks``, ``side``, ``sensing``, ``controller``, ``seed``) and its spec."""
+    ``tracks``, ``side``, ``sensing``: the profile's label, ``/PLANT`` added where the suite
+    names ``plants``, ``controller``, ``seed``) and its spec (``plant``: its plant's kind)."""
 
     motion: str
     group: str
@@ -60,6 +63,10 @@ class Episode:
     controller: str
     seed: int
     spec: EpisodeSpec
+
+    @property
+    def plant(self) -> str:
+        return self.spec.params.plant.kind
 
     @property
     def key(self) -> str:
@@ -74,7 +81,8 @@ class Episode:
     @property
     def factors(self) -> dict[str, Any]:
         return {"motion": self.motion, "group": self.group, "side": self.side,
-                "sensing": self.sensing, "controller": self.controller, "seed": self.seed}
+                "sensing": self.sensing, "controller": self.controller, "seed": self.seed,
+                "plant": self.plant}
 
 
 @dataclass(frozen=True)
@@ -141,6 +149,7 @@ def suite_from_mapping(data: Mapping[str, Any], path: Path, digest: Any = None) 
                in enumerate(_list(data.get("sensing", ["realistic"]), f"{where}sensing"))]
     sides = [_side(s, f"{where}sides[{i}]")
              for i, s in enumerate(_list(data.get("sides", ["left"]), f"{where}sides"))]
+    plants = _plants(data.get("plants"), f"{where}plants")
     seeds = _seeds(data.get("seeds", 1), f"{where}seeds")
     obstacles = data.get("obstacles")
     if obstacles is not None and obstacles not in OBSTACLE_SOURCES:
@@ -155,25 +164,26 @@ def suite_from_mapping(data: Mapping[str, Any], path: Path, digest: Any = None) 
     faults = faults_from_list(data["faults"], f"{where}faults") if "faults" in data else ()
     criteria = criteria_from(data["criteria"], f"{where}criteria") if "criteria" in data else ()
     moves = motions(data.get("motions", {"scenarios": ["figure8"]}), path, digest, _resolve)
-    total = sum(len(fixed_sides(m, sides)) for m in moves) * len(sensing) * len(seeds) \
-        * len(controllers)
+    total = sum(len(fixed_sides(m, sides)) for m in moves) * len(sensing) * len(plants) \
+        * len(seeds) * len(controllers)
     if total > MAX_EPISODES:
         raise ConfigError(f"{where}expected at most {MAX_EPISODES} episodes, got {total} "
-                          f"(motions x sides x sensing x seeds x controllers)")
+                          f"(motions x sides x sensing x plants x seeds x controllers)")
     episodes = []
     final: dict[tuple, Params] = {}     # validated once per group, controller, side, sensing
     for m, motion in enumerate(moves):
         group, base, build = motion.group, motion.base, motion.build
         for side_name, bearing in fixed_sides(motion, sides):
-            for sensing_name, sensing_params in sensing:
+            for (sensing_name, sensing_params), plant in itertools.product(sensing, plants):
+                label_s = sensing_name if plant is None else f"{sensing_name}/{plant}"
                 for seed in seeds:
                     episode_seed = _episode_seed(seed, m)
                     for label, name, overrides in controllers:
                         key = (group if motion.shared else motion.name, label, side_name,
-                               sensing_name)
+                               label_s)
                         if key not in final:
                             final[key] = _final(partial(base, label, overrides), name, bearing,
-                                                sensing_params,
+                                                sensing_params, plant,
                                                 _factors(where, sides, side_name, sensing,
                                                          sensing_name, controllers, label))
                         if duration is not None and duration < final[key].dt:
@@ -186,7 +196,7 @@ def suite_from_mapping(data: Mapping[str, Any], path: Path, digest: Any = None) 
                             duration=min(spec.duration, duration or math.inf),
                             obstacle_source=obstacles or spec.obstacle_source,
                             faults=spec.faults + tuple(faults))
-                        episodes.append(Episode(motion.name, group, side_name, sensing_name, label,
+                        episodes.append(Episode(motion.name, group, side_name, label_s, label,
                                                 seed, spec))
     keys = [e.key for e in episodes]
     if len(set(keys)) != len(keys):
@@ -198,15 +208,18 @@ def suite_from_mapping(data: Mapping[str, Any], path: Path, digest: Any = None) 
 
 
 def _final(base: Callable[[], Params], controller: str, bearing: float | None,
-           sensing: SensingParams, where: str) -> Params:
+           sensing: SensingParams, plant: str | None, where: str) -> Params:
     """An episode's parameters: the motion's with a controller's overrides (``base()``) and
-    the suite's sensing and side (``bearing``; None: the motion's own). A combination that
+    the suite's sensing, plant (None: the parameters' own) and side (``bearing``; None: the
+    motion's own). A combination that
     the checks across sections refuse, or whose ``controller`` cannot be made (LQR weights
     without a stabilising gain), raises naming ``where``."""
     try:
         p = base()
         p = p.replace(sensing=sensing, formation=dataclasses.replace(
             p.formation, bearing=p.formation.bearing if bearing is None else bearing))
+        if plant is not None:
+            p = p.replace(plant=dataclasses.replace(p.plant, kind=plant))
         make_controller(controller, p)
     except ConfigError as exc:
         raise ConfigError(f"{where}: {exc}") from None
@@ -230,6 +243,19 @@ def track_episode(person: RecordedPerson, params: Params, controller: str = "lqr
     params = params.replace(formation=dataclasses.replace(params.formation,
                                                           bearing=SIDES[side]))
     return EpisodeSpec(controller, person, params, person.duration, seed=seed)
+
+
+def _plants(value: Any, where: str) -> list[str | None]:
+    """The suite's ``plants`` (each of :data:`~companion.params.PLANTS`), or ``[None]``: the
+    parameters' own plant, no factor."""
+    if value is None:
+        return [None]
+    names = _list(value, where)
+    for i, name in enumerate(names):
+        if name not in PLANTS:
+            raise ConfigError(f"{where}[{i}]: expected one of {', '.join(map(repr, PLANTS))}, "
+                              f"got {name!r}{hint(str(name), PLANTS)}")
+    return list(dict.fromkeys(names))
 
 
 def _episode_seed(seed: int, motion: int) -> int:

@@ -32,6 +32,7 @@ from companion.params.control import (
     SupervisorParams,
     VsmParams,
 )
+from companion.params.plant import PLANTS, PlantParams
 from companion.params.sensing import (
     IDEAL,
     PROFILES,
@@ -43,7 +44,8 @@ from companion.params.sensing import (
     TrackerParams,
 )
 
-__all__ = ["BEHIND", "FRONT", "IDEAL", "LEFT", "PROFILES", "REALISTIC", "RIGHT", "SIDES",
+__all__ = ["BEHIND", "FRONT", "IDEAL", "LEFT", "PLANTS", "PROFILES", "REALISTIC", "RIGHT",
+           "SIDES", "PlantParams",
            "AvoidanceParams", "ExtractorParams", "Formation", "ImpedanceParams", "SearchParams",
            "KeepOutParams", "LidarParams", "MoverParams", "LqrParams", "Params", "PidParams",
            "RobotParams", "SensingParams", "SupervisorParams", "TrackerParams", "VsmParams",
@@ -77,6 +79,7 @@ class Params(Validated):
     pid: PidParams = param(PidParams(), "", "")
     vsm: VsmParams = param(VsmParams(), "", "")
     impedance: ImpedanceParams = param(ImpedanceParams(), "", "")
+    plant: PlantParams = param(PlantParams(), "", "")
 
     def __post_init__(self) -> None:
         super().__post_init__()

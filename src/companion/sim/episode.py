@@ -1,16 +1,18 @@
-"""Closed-loop episode: person motion, sensing, controller and a unicycle plant with lag.
+"""Closed-loop episode: person motion, sensing, controller and the robot's base (its plant).
 
 :class:`Simulator` is the world of one episode, steppable from outside: ``reset(seed)`` gives
 the first observation, ``step(command)`` applies a command for one period and gives the next.
-At each sample ``k`` (time ``t_k = k * dt``) the robot observes its pose and velocity
-(odometry), the person detections that have arrived (:class:`~companion.sim.sensing.PersonSensor`)
-and the obstacles it knows, as the active faults corrupt them; the command is held for one
-period while the robot's actual velocities follow it through the first-order lag
-``sensing.actuator_tau_s`` and the unicycle is integrated along the arc of the period's mean
-velocity (exact without lag, :func:`companion.geometry.base_step`). Row ``k`` of the log
-holds the true state at ``t_k``, the command applied from ``t_k`` on and the tracker's
-estimate. :func:`episode_blocks` drives a simulator with a controller. The episode is
-deterministic for a given seed.
+At each sample ``k`` (time ``t_k = k * dt``) the robot observes its pose and velocity (the
+plant's odometry, :mod:`companion.sim.plant`), the person detections that have arrived
+(:class:`~companion.sim.sensing.PersonSensor`) and the obstacles it knows, as the active faults
+corrupt them; the command is held for one period while the plant moves: the kinematic
+unicycle's actual velocities follow it through the first-order lag ``sensing.actuator_tau_s``
+along the arc of the period's mean velocity (exact without lag,
+:func:`companion.geometry.base_step`); the MuJoCo base turns its wheels. What the robot senses
+is seen from its true pose and handed over in its odometry frame. Row ``k`` of the log holds
+the true state at ``t_k``, the command applied from ``t_k`` on and the tracker's estimate.
+:func:`episode_blocks` drives a simulator with a controller. The episode is deterministic for a
+given seed.
 """
 
 from __future__ import annotations
@@ -23,13 +25,14 @@ import numpy as np
 from companion.control.base import Controller
 from companion.control.supervisor import SafetySupervisor
 from companion.errors import ConfigError
-from companion.geometry import base_step, clearance, wrap_pi
+from companion.geometry import clearance
 from companion.model import robot_pose_at, slot_reference
 from companion.params import IDEAL, Params
 from companion.sim.crowd import WALKER_RADIUS, Crowd
 from companion.sim.faults import Fault, stalled
 from companion.sim.faults import apply as apply_faults
 from companion.sim.person import PersonMotion
+from companion.sim.plant import FrameShift, make_plant
 from companion.sim.recorder import Recorder, Sample
 from companion.sim.sensing import GroundTruth, Perception, PersonSensor, in_view, streams
 from companion.types import Command, Log, Observation, Obstacle, PersonState, Pose, StepReport
@@ -194,6 +197,7 @@ class Simulator:
         self.perception = perception or GroundTruth()
         self.detections = detections
         self._start_velocity = start_velocity
+        self.plant = make_plant(params, self.obstacles)
         self.k = 0
         #: The true state of the last sample stepped and the command applied from it.
         self.sample: Sample | None = None
@@ -220,8 +224,7 @@ class Simulator:
             self._handover = (self._sensor.handover(0.0),) if self.detections else ()
         else:
             pose = self.start
-        self._x, self._y, self._th = pose.x, pose.y, pose.theta
-        self._va, self._wa = self.start_velocity or (0.0, 0.0)
+        self.plant.reset(pose, self.start_velocity or (0.0, 0.0))
         self._cmd = Command(0.0, 0.0)
         self._base = self.start_velocity or (0.0, 0.0)   # what the base executes
         self._last_command = 0.0
@@ -238,15 +241,22 @@ class Simulator:
         """The observation of sample :attr:`k`, as the active faults corrupt it."""
         t = self.k * self.params.dt
         h = self.person.state(t)
-        pose = Pose(self._x, self._y, self._th)
+        pose, odometry = self.plant.pose, self.plant.odometry
         world = self._blockers()
         self._in_view = in_view(pose, h, world, self.params.sensing)
         arrived = (*self._handover, *self._sensor.detections(t, self._in_view)) \
             if self.detections else ()
         self._handover = ()
         known, scan = self.perception.sense(self.k, pose, world, (h.x, h.y), self._rng["lidar"])
-        obs = Observation(t, pose, None if self.detections else h, known, scan,
-                          (self._va, self._wa), arrived)
+        shift = FrameShift(pose, odometry)
+        if not shift.identity:       # seen from the true pose, told in the odometry frame
+            known = tuple(shift.obstacle(o) for o in known)
+            scan = None if scan is None else shift.scan(scan, odometry)
+            arrived = tuple(shift.detection(d) for d in arrived)
+            x, y = shift.point(h.x, h.y)
+            h = PersonState(x, y, h.theta + shift.rot, h.v, h.omega)
+        obs = Observation(t, odometry, None if self.detections else h, known, scan,
+                          self.plant.odometry_velocity, arrived)
         return apply_faults(obs, self.faults)
 
     def _blockers(self) -> tuple[Obstacle, ...]:
@@ -271,17 +281,16 @@ class Simulator:
             self._cmd, came = Command(*self._base, 0.0, "stopped"), "timeout"
         else:
             came = "held"
-        x, y, th, va, wa = self._x, self._y, self._th, self._va, self._wa
+        pose, (va, wa), h = self.plant.pose, self.plant.velocity, self.person.state(t)
+        x, y, th = pose.x, pose.y, pose.theta
         walkers = None if self.crowd is None else self.crowd.positions[:-1].ravel().copy()
-        self.sample = Sample(t, Pose(x, y, th), (va, wa), self.person.state(t), self._cmd,
+        self.sample = Sample(t, pose, (va, wa), h, self._cmd,
                              nearest_clearance(x, y, self.obstacles, p.robot.radius),
                              *self._walkers.sample(x, y, self.crowd), self._in_view, came,
-                             walkers)
+                             walkers, self.plant.odometry, self.plant.contact)
         if self.crowd is not None:
             self.crowd.step((x, y, va * math.cos(th), va * math.sin(th)))
-        x, y, th, self._va, self._wa = base_step(x, y, th, va, wa, *self._base,
-                                                 p.sensing.actuator_tau_s, p.dt)
-        self._x, self._y, self._th = x, y, wrap_pi(th)
+        self.plant.step(self._base, t, (h.x, h.y))
         self.k += 1
         return self._observe() if self.k < self.steps else None
 

@@ -38,17 +38,19 @@ _SLOT, _CLEARANCE = LOG_COLUMNS.index("slot_error_m"), LOG_COLUMNS.index("rho_ob
 
 class FollowEnv(gym.Env):
     """Walk beside the person of a built-in ``scenario`` (or a scenario TOML file) under the
-    ``sensing`` profile (a name of :data:`companion.params.PROFILES` or a sensing TOML file),
-    with the scenario's
-    obstacles known exactly (``obstacles="truth"``) or as the simulated LiDAR sees them (the
-    raw scan in ``info["observation"].scan``; :class:`companion.perception.front_end.FrontEnd`
-    turns scans into obstacles as the standard stack does)."""
+    ``sensing`` profile (a name of :data:`companion.params.PROFILES` or a sensing TOML
+    file), on the scenario's plant or ``plant`` ("kinematic" or "mujoco", docs/plants.md),
+    with the scenario's obstacles known exactly (``obstacles="truth"``) or as the simulated
+    LiDAR sees them (the raw scan in ``info["observation"].scan``;
+    :class:`companion.perception.front_end.FrontEnd` turns scans into obstacles as the
+    standard stack does)."""
 
     metadata = {"render_modes": []}
 
     def __init__(self, scenario: str = "figure8", sensing: str = "ideal",
-                 obstacles: str | None = None, duration: float | None = None):
-        sc = load_scenario(scenario)
+                 obstacles: str | None = None, duration: float | None = None,
+                 plant: str | None = None):
+        sc = load_scenario(scenario, None if plant is None else {"plant": {"kind": plant}})
         self.params = sc.params.replace(sensing=load_sensing(sensing))
         self.scenario = sc
         source = obstacles or sc.obstacle_source

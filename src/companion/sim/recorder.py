@@ -17,7 +17,16 @@ from companion.control.slot import reference_point, slot_point
 from companion.geometry import offset_point, unicycle_step
 from companion.model import relative_state, slot_reference
 from companion.params import Params
-from companion.types import LOG_COLUMNS, Command, Log, PersonState, Pose, StepReport
+from companion.sim.plant import FrameShift
+from companion.types import (
+    LOG_COLUMNS,
+    Command,
+    Log,
+    PersonEstimate,
+    PersonState,
+    Pose,
+    StepReport,
+)
 
 _NO_ESTIMATE = (math.nan,) * 6
 
@@ -30,8 +39,10 @@ class Sample:
     to the nearest walker (m, NaN without walkers) and whether a contact with a walker
     begins (1: the robot's doing, 2: the walker's, 0: none), whether the person detector
     could see the person, how the command came (``"new"``, ``"held"``: the last one stays
-    in force, ``"timeout"``: the base brakes on its own), and the walkers' positions (x0,
-    y0, x1, ...; crowds only)."""
+    in force, ``"timeout"``: the base brakes on its own), the walkers' positions (x0,
+    y0, x1, ...; crowds only), the pose the robot's odometry reports (None: the true one)
+    and whether the plant's physics finds the robot's body touching the person or an
+    obstacle (1 or 0; NaN for a plant without bodies)."""
 
     t: float
     robot: Pose
@@ -44,6 +55,8 @@ class Sample:
     in_view: bool
     came: str = "new"
     walkers_xy: np.ndarray | None = None
+    odometry: Pose | None = None
+    plant_contact: float = math.nan
 
 
 def error_split(robot: Pose, person: PersonState, cmd: Command, report: StepReport,
@@ -71,6 +84,19 @@ def error_split(robot: Pose, person: PersonState, cmd: Command, report: StepRepo
     return math.hypot(rx - sx, ry - sy), estimate_error, tracking_error, shift
 
 
+def in_world(estimate: PersonEstimate, odometry: Pose, truth: Pose) -> PersonEstimate:
+    """An estimate the robot holds in its odometry frame, in the world frame: the person
+    where the robot believes them relative to where it really is."""
+    shift = FrameShift(odometry, truth)
+
+    def moved(s: PersonState) -> PersonState:
+        x, y = shift.point(s.x, s.y)
+        return PersonState(x, y, s.theta + shift.rot, s.v, s.omega)
+
+    return dataclasses.replace(estimate, state=moved(estimate.state),
+                               walker=moved(estimate.walker))
+
+
 def row(sample: Sample, report: StepReport, params: Params) -> tuple[float, ...]:
     """The numbers of one log row (:data:`~companion.types.LOG_COLUMNS`)."""
     p, f = params, params.formation
@@ -78,6 +104,10 @@ def row(sample: Sample, report: StepReport, params: Params) -> tuple[float, ...]
         p = p.replace(formation=dataclasses.replace(f, bearing=report.bearing))
         f = p.formation
     r, h, cmd, d = sample.robot, sample.person, sample.command, p.robot.d
+    o = sample.odometry or r
+    odo = (o.x, o.y, o.theta)
+    if o != r and report.estimate is not None:   # the robot's belief, in the world frame
+        report = report._replace(estimate=in_world(report.estimate, o, r))
     e = report.estimate
     est = _NO_ESTIMATE if e is None else (e.state.x, e.state.y, e.state.theta, e.state.v,
                                           e.state.omega, e.position_std)
@@ -87,7 +117,8 @@ def row(sample: Sample, report: StepReport, params: Params) -> tuple[float, ...]
             f.distance, f.bearing, beta_ref, cmd.v, cmd.omega, cmd.u_ob, sample.clearance,
             *sample.velocity, *est, *error_split(r, h, cmd, report, p),
             math.hypot(h.x - r.x, h.y - r.y) - p.robot.radius - p.lidar.person_radius,
-            sample.walker_gap, sample.walker_contact, float(sample.in_view))
+            sample.walker_gap, sample.walker_contact, float(sample.in_view), *odo,
+            sample.plant_contact)
 
 
 class Recorder:

@@ -38,8 +38,8 @@ Example::
 
 ``obstacle_source`` (top level) is "truth" (the controller knows the obstacles exactly) or
 "lidar" (it sees what the simulated LiDAR detects). ``sensing`` (top level) is "ideal",
-"realistic" or a ``[sensing]`` table (docs/sensing.md; missing keys: realistic); without it
-the sensing is ideal.
+"realistic" or a ``[sensing]`` table (docs/sensing.md; missing keys: realistic; default ideal);
+``plant`` is "kinematic" (default) or "mujoco" (the robot's base, docs/plants.md).
 """
 
 from __future__ import annotations
@@ -273,7 +273,7 @@ class Scenario:
 
 
 TOP_KEYS = ("name", "description", "duration", "seed", "controller", "obstacle_source",
-            "sensing", "person", "crowd", "robot", "obstacles", "params", "faults")
+            "sensing", "plant", "person", "crowd", "robot", "obstacles", "params", "faults")
 def _resolve_auto_side(params_map: dict, start: Pose | None, person: PersonMotion,
                        where: str) -> dict:
     formation = params_map.get("formation")
@@ -304,12 +304,10 @@ def scenario_from_mapping(data: Mapping[str, Any], source: str, base_dir: Path,
     """Build a validated :class:`Scenario`; errors are prefixed with ``source``."""
     where = f"{source}: "
     reject_unknown(data, TOP_KEYS, where)
-    name = data.get("name", Path(source).stem)
-    if not isinstance(name, str):
-        raise ConfigError(f"{where}name: expected a string, got {name!r}")
-    description = data.get("description", "")
-    if not isinstance(description, str):
-        raise ConfigError(f"{where}description: expected a string, got {description!r}")
+    name, description = data.get("name", Path(source).stem), data.get("description", "")
+    for key, value in (("name", name), ("description", description)):
+        if not isinstance(value, str):
+            raise ConfigError(f"{where}{key}: expected a string, got {value!r}")
     duration = data.get("duration", 60.0)
     if isinstance(duration, bool) or not isinstance(duration, (int, float)) \
             or not 0.0 < duration <= MAX_DURATION:
@@ -343,6 +341,8 @@ def scenario_from_mapping(data: Mapping[str, Any], source: str, base_dir: Path,
     params_map = data.get("params", {})
     if not isinstance(params_map, Mapping):
         raise ConfigError(f"{where}params: expected a table")
+    if "plant" in data:                  # the top-level key is params.plant.kind
+        params_map = deep_merge(params_map, {"plant": {"kind": data["plant"]}})
     if params_override:
         params_map = deep_merge(params_map, params_override)
     params_map = _resolve_auto_side(dict(params_map), start, person, where)
