@@ -91,16 +91,16 @@ def test_node_sigterm_ends_with_a_zero_velocity(tmp_path, ros_domain):
 
 
 @functools.cache
-def in_process(sensing: str, seed: int, duration: float):
+def in_process(sensing: str, seed: int, duration: float, plant: str = "kinematic"):
     """``companion run figure8`` in-process (the node's LiDAR obstacles, as sim-robot's)."""
-    sc = load_scenario("figure8", {"sensing": sensing})
+    sc = load_scenario("figure8", {"sensing": sensing, "plant": {"kind": plant}})
     return run_one(dataclasses.replace(sc.episode(), duration=duration, seed=seed,
                                        obstacle_source="lidar"))
 
 
 def lockstep_run(tmp_path, ros_domain, transport: str, sensing: str, person_type: str,
-                 duration: float, seed: int = 0):
-    """sim-robot and node in lock step over ``transport``; sim-robot's log."""
+                 duration: float, seed: int = 0, plant: str = "kinematic"):
+    """sim-robot (on ``plant``) and node in lock step over ``transport``; sim-robot's log."""
     flags = ["--transport", transport, "--domain-id", str(ros_domain)]
     if transport == "zenoh":
         flags += ["--zenoh-connect", f"tcp/127.0.0.1:{free_port()}"]
@@ -115,6 +115,7 @@ def lockstep_run(tmp_path, ros_domain, transport: str, sensing: str, person_type
         robot = subprocess.run([*CLI, "sim-robot", "figure8", "--lockstep", "--rate", "100",
                                 "--duration", str(duration), "--sensing", sensing, "--seed",
                                 str(seed), "--person-type", person_type, "--wait", "60",
+                                "--plant", plant,
                                 "--out", str(tmp_path / "run"), *flags], env=env,
                                capture_output=True, text=True, timeout=180)
     finally:
@@ -138,6 +139,16 @@ def test_lockstep_ideal_matches_the_in_process_run(tmp_path, ros_domain, transpo
     ref = metrics.compute(direct)["rmse_rho_m"]
     assert abs(m["rmse_rho_m"] - ref) < 0.01, (m["rmse_rho_m"], ref)
     for column in ("robot_x", "robot_y", "robot_theta"):
+        np.testing.assert_allclose(log[column], direct[column], atol=1e-8)
+
+
+def test_lockstep_on_the_mujoco_base_matches_the_in_process_run(tmp_path, ros_domain):
+    """The MuJoCo plant behind the wire: the robot's odometry on /odom, the same trajectory
+    as the in-process run (docs/plants.md)."""
+    log, _ = lockstep_run(tmp_path, ros_domain, "dds", "ideal", "odometry", 10.0,
+                          plant="mujoco")
+    direct = in_process("ideal", 0, 10.0, "mujoco")
+    for column in ("robot_x", "robot_y", "robot_theta", "odom_x", "odom_y"):
         np.testing.assert_allclose(log[column], direct[column], atol=1e-8)
 
 
