@@ -52,6 +52,11 @@ def sensing_entry(args: argparse.Namespace, default: str) -> str | dict:
     return default
 
 
+def plant_entry(args: argparse.Namespace) -> dict:
+    """A suite's ``plants`` for the command's ``--plant`` (none given: the suite's own)."""
+    return {"plants": [args.plant]} if args.plant else {}
+
+
 def cmd_pedestrians(args: argparse.Namespace) -> int:
     params = params_arg(args)
     controllers = list(CONTROLLERS) if args.controller == "all" else [args.controller]
@@ -66,7 +71,7 @@ def cmd_pedestrians(args: argparse.Namespace) -> int:
     data.update(controllers=[controller_entry(c, args) for c in controllers],
                 reference=controllers[0], sensing=[sensing_entry(args, "ideal")],
                 sides=["left", "right"] if args.side == "both" else [args.side],
-                motions=motions)
+                motions=motions, **plant_entry(args))
     out = output_dir(Path(args.out or Path("out") / "pedestrians"))
     suite = suite_from_mapping(data, Path("<companion pedestrians>"))
     rows = evaluate(suite, out, workers, args.dask)
@@ -112,7 +117,7 @@ def cmd_convergence(args: argparse.Namespace) -> int:
         data["criteria"]["settling_time_s"] = {
             "max": number_arg(args.settle_limit, "--settle-limit", "S")}
     data.update(controllers=[controller_entry(args.controller, args)],
-                sensing=[sensing_entry(args, "ideal")])
+                sensing=[sensing_entry(args, "ideal")], **plant_entry(args))
     workers = workers_arg(args)
     out = output_dir(Path(args.out or Path("out") / "convergence"))
     suite = suite_from_mapping(data, Path("<companion convergence>"))
