@@ -172,7 +172,7 @@ class Summary:
                                   + self.params.lidar.person_radius)
         self._finite = self._finite and all(
             bool(np.all(np.isfinite(a))) for c, a in log.columns.items()
-            if c not in ("status", "reason", "rho_ob", "walker_gap_m"))
+            if c not in ("status", "reason", "rho_ob", "walker_gap_m", "plant_contact"))
 
     def value(self) -> dict:
         m = self._metrics.value()
