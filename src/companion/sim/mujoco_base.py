@@ -17,7 +17,6 @@ import math
 from collections.abc import Sequence
 
 import mujoco
-import numpy as np
 
 from companion.geometry import unicycle_step, wrap_pi
 from companion.params import Params
@@ -211,7 +210,3 @@ class MujocoPlant:
         return max(abs((ov - ow * self.half) - (v - w * self.half)),
                    abs((ov + ow * self.half) - (v + w * self.half)))
 
-
-def wheel_angles(plant: MujocoPlant) -> np.ndarray:
-    """The two wheels' angles (rad), left and right (for tests and benches)."""
-    return np.array([plant.data.qpos[i] for i in plant._wheels])
