@@ -251,10 +251,9 @@ class Simulator:
         shift = FrameShift(pose, odometry)
         if not shift.identity:       # seen from the true pose, told in the odometry frame
             known = tuple(shift.obstacle(o) for o in known)
-            scan = None if scan is None else shift.scan(scan, odometry)
+            scan = None if scan is None else shift.scan(scan)
             arrived = tuple(shift.detection(d) for d in arrived)
-            x, y = shift.point(h.x, h.y)
-            h = PersonState(x, y, h.theta + shift.rot, h.v, h.omega)
+            h = shift.person(h)
         obs = Observation(t, odometry, None if self.detections else h, known, scan,
                           self.plant.odometry_velocity, arrived)
         return apply_faults(obs, self.faults)

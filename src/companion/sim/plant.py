@@ -18,7 +18,7 @@ from typing import Protocol
 
 from companion.geometry import base_step, wrap_pi
 from companion.params import Params
-from companion.types import Circle, Obstacle, PersonDetection, Pose, Scan
+from companion.types import Circle, Obstacle, PersonDetection, PersonState, Pose, Scan
 
 
 class Plant(Protocol):
@@ -79,7 +79,7 @@ class FrameShift:
     to its odometry pose. ``identity`` when odometry is the truth (then nothing is copied)."""
 
     def __init__(self, truth: Pose, odometry: Pose):
-        self.identity = truth == odometry
+        self.identity, self.odometry = truth == odometry, odometry
         self.rot = wrap_pi(odometry.theta - truth.theta)
         c, s = math.cos(self.rot), math.sin(self.rot)
         self._c, self._s = c, s
@@ -88,6 +88,10 @@ class FrameShift:
 
     def point(self, x: float, y: float) -> tuple[float, float]:
         return (self._c * x - self._s * y + self._tx, self._s * x + self._c * y + self._ty)
+
+    def person(self, p: PersonState) -> PersonState:
+        x, y = self.point(p.x, p.y)
+        return PersonState(x, y, wrap_pi(p.theta + self.rot), p.v, p.omega)
 
     def vector(self, x: float, y: float) -> tuple[float, float]:
         return self._c * x - self._s * y, self._s * x + self._c * y
@@ -116,5 +120,7 @@ class FrameShift:
             changes["covariance"] = (xx, xy, xy, yy)
         return replace(d, **changes)
 
-    def scan(self, scan: Scan, odometry: Pose) -> Scan:
-        return replace(scan, x=odometry.x, y=odometry.y, theta=odometry.theta)
+    def scan(self, scan: Scan) -> Scan:
+        """The scan, taken from the true pose, with its pose the odometry's."""
+        o = self.odometry
+        return replace(scan, x=o.x, y=o.y, theta=o.theta)

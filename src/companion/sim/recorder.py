@@ -88,13 +88,8 @@ def in_world(estimate: PersonEstimate, odometry: Pose, truth: Pose) -> PersonEst
     """An estimate the robot holds in its odometry frame, in the world frame: the person
     where the robot believes them relative to where it really is."""
     shift = FrameShift(odometry, truth)
-
-    def moved(s: PersonState) -> PersonState:
-        x, y = shift.point(s.x, s.y)
-        return PersonState(x, y, s.theta + shift.rot, s.v, s.omega)
-
-    return dataclasses.replace(estimate, state=moved(estimate.state),
-                               walker=moved(estimate.walker))
+    return dataclasses.replace(estimate, state=shift.person(estimate.state),
+                               walker=shift.person(estimate.walker))
 
 
 def row(sample: Sample, report: StepReport, params: Params) -> tuple[float, ...]:
