@@ -177,3 +177,17 @@ def test_the_figure8_on_mujoco_stays_within_1_3_times_the_kinematic_slot_error()
         errors[kind] = compute(run_scenario(dataclasses.replace(sc, params=p)))[
             "rms_slot_error_m"]
     assert errors["mujoco"] <= 1.3 * errors["kinematic"], errors
+
+
+def test_plants_are_a_suite_factor_with_named_errors(tmp_path):
+    from companion.errors import ConfigError
+    from companion.evaluate.suite import suite_from_mapping
+
+    data = {"controllers": ["lqr", "pid"], "sensing": ["ideal"],
+            "plants": ["kinematic", "mujoco"], "motions": {"scenarios": ["line"]}}
+    suite = suite_from_mapping(data, tmp_path / "s.toml")
+    assert sorted({(e.sensing, e.plant) for e in suite.episodes}) == [
+        ("ideal/kinematic", "kinematic"), ("ideal/mujoco", "mujoco")]
+    assert len({e.pair for e in suite.episodes}) == 2          # paired within a plant
+    with pytest.raises(ConfigError, match=r"s.toml: plants\[1\]: .* got 'mujo'; did you mean"):
+        suite_from_mapping(dict(data, plants=["kinematic", "mujo"]), tmp_path / "s.toml")
